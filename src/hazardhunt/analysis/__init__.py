@@ -1,0 +1,1 @@
+"""Tables, statistics, plots and reports from stored results."""

@@ -1,0 +1,1 @@
+"""Runs and campaigns: configuration, seeding, executors, result store."""

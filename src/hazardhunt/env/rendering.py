@@ -1,0 +1,162 @@
+"""Pictures of the workplace: floor, shelves, route, robot with its protective field, human."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Polygon, Wedge
+from numpy.typing import NDArray
+
+from hazardhunt.sut.route import Route
+from hazardhunt.world.bodies import HumanParams, RobotParams
+from hazardhunt.world.geometry import rectangle_corners
+from hazardhunt.world.scenario import Scenario
+
+if TYPE_CHECKING:
+    from hazardhunt.env.agv import AGVEnv
+
+OUTCOME_COLOURS = {
+    "failure": "#d62728",
+    "safe_contact": "#ff7f0e",
+    "goal": "#2ca02c",
+    "timeout": "#7f7f7f",
+    "stall": "#9467bd",
+    "sut_error": "#8c564b",
+}
+
+
+def draw_floor(ax: Axes, scenario: Scenario, route: Route | None = None) -> None:
+    """Walls, shelf blocks, blind zones, the route and the goal."""
+    floor = scenario.floor
+    for zone in floor.blind_zones:
+        ax.add_patch(Polygon(zone, closed=True, facecolor="#fff3b0", edgecolor="none", zorder=0))
+    for obstacle in floor.obstacles:
+        colour = "#404040" if obstacle.kind == "wall" else "#a67c52"
+        ax.add_patch(Polygon(obstacle.polygon, closed=True, facecolor=colour, edgecolor="none"))
+    if route is not None:
+        ax.plot(*route.points.T, linestyle="--", color="#1f77b4", linewidth=1, label="route")
+    ax.plot(*scenario.goal, marker="*", markersize=12, color="#2ca02c", linestyle="none")
+    ax.set_xlim(0, floor.width)
+    ax.set_ylim(0, floor.height)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def draw_robot(
+    ax: Axes,
+    pose: tuple[float, float, float],
+    params: RobotParams,
+    field_diameter: float | None,
+    emergency_stop: bool = False,
+    alpha: float = 1.0,
+) -> None:
+    """The robot's rectangle and, when it has one, its half-disc protective field."""
+    x, y, heading = pose
+    if field_diameter is not None:
+        front = (
+            x + params.length / 2 * math.cos(heading),
+            y + params.length / 2 * math.sin(heading),
+        )
+        degrees = math.degrees(heading)
+        ax.add_patch(
+            Wedge(
+                front,
+                field_diameter / 2,
+                degrees - 90,
+                degrees + 90,
+                facecolor="#d62728" if emergency_stop else "#2ca02c",
+                alpha=0.25 * alpha,
+                edgecolor="none",
+            )
+        )
+    corners = rectangle_corners(x, y, heading, params.length, params.width)
+    ax.add_patch(
+        Polygon(corners, closed=True, facecolor="#1f77b4", edgecolor="black", alpha=alpha, zorder=3)
+    )
+
+
+def draw_human(
+    ax: Axes, position: Sequence[float], heading: float, params: HumanParams, alpha: float = 1.0
+) -> None:
+    """The human's disc with a tick for its heading."""
+    center = (float(position[0]), float(position[1]))
+    ax.add_patch(
+        Circle(center, params.radius, facecolor="#ff7f0e", edgecolor="black", alpha=alpha, zorder=4)
+    )
+    tip = (
+        position[0] + params.radius * math.cos(heading),
+        position[1] + params.radius * math.sin(heading),
+    )
+    ax.plot([position[0], tip[0]], [position[1], tip[1]], color="black", linewidth=1, zorder=5)
+
+
+def plot_episode(
+    path: Path,
+    scenario: Scenario,
+    route: Route,
+    trajectory: list[dict[str, Any]],
+    field_diameter: float | None,
+    title: str,
+    outcome: str | None = None,
+    robot: RobotParams = RobotParams(),
+    human: HumanParams = HumanParams(),
+) -> Path:
+    """Write a PNG of one episode: both tracks and the final poses."""
+    figure = Figure(figsize=(7, 7), dpi=110)
+    ax = figure.add_subplot()
+    draw_floor(ax, scenario, route)
+    robot_track = np.array([[row["robot_x"], row["robot_y"]] for row in trajectory])
+    human_track = np.array([[row["human_x"], row["human_y"]] for row in trajectory])
+    ax.plot(*robot_track.T, color="#1f77b4", linewidth=1.5, label="robot")
+    ax.plot(*human_track.T, color="#ff7f0e", linewidth=1.5, label="human")
+    ax.plot(*robot_track[0], "s", color="#1f77b4", markerfacecolor="white", label="start")
+    ax.plot(*human_track[0], "o", color="#ff7f0e", markerfacecolor="white")
+    stops = np.array([row["emergency_stop"] for row in trajectory], dtype=bool)
+    if stops.any():
+        ax.plot(*robot_track[stops].T, "x", color="#d62728", markersize=4, label="emergency stop")
+    last = trajectory[-1]
+    draw_robot(
+        ax,
+        (last["robot_x"], last["robot_y"], last["robot_heading"]),
+        robot,
+        field_diameter,
+        last["emergency_stop"],
+    )
+    draw_human(ax, (last["human_x"], last["human_y"]), last["human_heading"], human)
+    colour = OUTCOME_COLOURS.get(outcome or "", "black")
+    ax.set_title(title, color=colour)
+    ax.legend(loc="upper right", fontsize=8)
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path)
+    return path
+
+
+def render_rgb(env: AGVEnv) -> NDArray[np.uint8]:
+    """The environment's current state as an RGB array (height, width, 3)."""
+    figure = Figure(figsize=(5, 5), dpi=80)
+    canvas = FigureCanvasAgg(figure)
+    ax = figure.add_subplot()
+    draw_floor(ax, env.scenario, env.route)
+    rows = env.trajectory()
+    if rows:
+        ax.plot([r["human_x"] for r in rows], [r["human_y"] for r in rows], color="#ff7f0e")
+        ax.plot([r["robot_x"] for r in rows], [r["robot_y"] for r in rows], color="#1f77b4")
+    robot = env.robot_state
+    draw_robot(
+        ax, (robot.x, robot.y, robot.heading), env.robot_params, env.field_diameter,
+        env.emergency_stop,
+    )  # fmt: skip
+    human_x, human_y, human_heading = env.human_pose
+    draw_human(ax, (human_x, human_y), human_heading, env.human_params)
+    ax.set_title(f"t = {env.sim_time:.1f} s")
+    canvas.draw()  # type: ignore[no-untyped-call]
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()  # type: ignore[no-untyped-call]

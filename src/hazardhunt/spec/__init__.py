@@ -1,0 +1,1 @@
+"""The safety specification, the risk metric, the rewards and the episode outcomes (SPEC 4)."""

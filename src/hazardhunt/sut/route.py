@@ -1,0 +1,155 @@
+"""The robot's reference route: a shortest collision-free polyline through its waypoints.
+
+Planned once per scenario over the static map on a visibility graph of the obstacles inflated
+by the robot's half width plus a margin (SPEC 3).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+import shapely
+from shapely.geometry import LineString, Polygon
+
+from hazardhunt.world.floor import FloorMap
+from hazardhunt.world.geometry import FloatArray
+
+
+class RoutePlanningError(ValueError):
+    """No collision-free route exists between two route points."""
+
+
+@dataclass(frozen=True)
+class Route:
+    """A polyline the robot follows, parameterised by arc length s (m)."""
+
+    points: FloatArray
+    """Shape (M, 2), M >= 2: the vertices, start first, goal last, in m."""
+    cumulative: FloatArray = field(init=False, repr=False, compare=False)
+    """Shape (M,): arc length at each vertex, in m."""
+
+    def __post_init__(self) -> None:
+        points = np.asarray(self.points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[0] < 2 or points.shape[1] != 2:
+            raise ValueError("a route needs at least two points (x, y)")
+        segment_lengths = np.hypot(*np.diff(points, axis=0).T)
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "cumulative", np.concatenate([[0.0], np.cumsum(segment_lengths)]))
+
+    @property
+    def length(self) -> float:
+        """Total length, in m."""
+        return float(self.cumulative[-1])
+
+    @property
+    def goal(self) -> FloatArray:
+        """The last point."""
+        return np.asarray(self.points[-1], dtype=np.float64)
+
+    def _segment_index(self, s: float) -> int:
+        index = int(np.searchsorted(self.cumulative, s, side="right")) - 1
+        return min(max(index, 0), len(self.points) - 2)
+
+    def point_at(self, s: float) -> FloatArray:
+        """The point at arc length s; beyond either end, the end segment extended."""
+        index = self._segment_index(s)
+        point = self.points[index] + (s - self.cumulative[index]) * self.tangent_at(s)
+        return np.asarray(point, dtype=np.float64)
+
+    def tangent_at(self, s: float) -> FloatArray:
+        """Unit direction of the segment at arc length s."""
+        index = self._segment_index(s)
+        direction = self.points[index + 1] - self.points[index]
+        return np.asarray(direction / max(float(np.hypot(*direction)), 1e-12), dtype=np.float64)
+
+    def project(self, point: FloatArray, s_min: float = 0.0, s_max: float = math.inf) -> float:
+        """Arc length of the route point nearest to ``point``, searched within [s_min, s_max]."""
+        best_s, best_distance = s_min, math.inf
+        for index in range(len(self.points) - 1):
+            start_s, end_s = self.cumulative[index], self.cumulative[index + 1]
+            if end_s < s_min or start_s > s_max:
+                continue
+            start = self.points[index]
+            direction = self.points[index + 1] - start
+            length = end_s - start_s
+            t = float(np.dot(point - start, direction)) / max(length * length, 1e-12)
+            s = float(np.clip(start_s + t * length, max(start_s, s_min), min(end_s, s_max)))
+            distance = float(np.hypot(*(self.point_at(s) - point)))
+            if distance < best_distance:
+                best_s, best_distance = s, distance
+        return best_s
+
+
+def inflated_obstacles(floor: FloorMap, inflation: float) -> list[Polygon]:
+    """The floor's obstacles grown by ``inflation`` m, with square corners."""
+    return [
+        Polygon(obstacle.polygon).buffer(inflation, join_style="mitre")
+        for obstacle in floor.obstacles
+    ]
+
+
+def plan_route(
+    floor: FloorMap,
+    start: FloatArray,
+    waypoints: FloatArray,
+    goal: FloatArray,
+    inflation: float,
+) -> Route:
+    """Shortest polyline from ``start`` through ``waypoints`` to ``goal`` that keeps ``inflation``
+    metres from every obstacle.
+
+    Raises:
+        RoutePlanningError: When a route point lies inside an inflated obstacle or two
+            consecutive route points cannot be connected.
+    """
+    blocked = inflated_obstacles(floor, inflation)
+    # Shrink by a hair so that paths along an inflated boundary or through its corners count
+    # as free; the visibility-graph nodes sit a hair outside each corner for the same reason.
+    solid = shapely.union_all([p.buffer(-1e-6, join_style="mitre") for p in blocked])
+    corners = [
+        np.asarray(coord)
+        for polygon in blocked
+        for coord in polygon.buffer(1e-4, join_style="mitre").exterior.coords[:-1]
+    ]
+    corners = [c for c in corners if floor.on_floor(c) and not solid.contains(shapely.Point(c))]
+    stops = [np.asarray(p, dtype=np.float64) for p in [start, *waypoints, goal]]
+    for stop in stops:
+        if solid.contains(shapely.Point(stop)):
+            raise RoutePlanningError(
+                f"route point ({stop[0]:.2f}, {stop[1]:.2f}) lies within {inflation:.2f} m of an "
+                "obstacle"
+            )
+    route = [stops[0]]
+    for origin, target in itertools.pairwise(stops):
+        route.extend(_shortest_leg(origin, target, corners, solid)[1:])
+    deduplicated = [route[0]] + [
+        p for previous, p in itertools.pairwise(route) if np.hypot(*(p - previous)) > 1e-9
+    ]
+    return Route(np.array(deduplicated))
+
+
+def _shortest_leg(
+    origin: FloatArray, target: FloatArray, corners: list[FloatArray], solid: shapely.Geometry
+) -> list[FloatArray]:
+    nodes = [origin, target, *corners]
+
+    def visible(a: FloatArray, b: FloatArray) -> bool:
+        return not solid.intersects(LineString([a, b]))
+
+    graph = nx.Graph()
+    graph.add_nodes_from(range(len(nodes)))
+    for i, j in itertools.combinations(range(len(nodes)), 2):
+        if visible(nodes[i], nodes[j]):
+            graph.add_edge(i, j, weight=float(np.hypot(*(nodes[i] - nodes[j]))))
+    try:
+        path = nx.shortest_path(graph, 0, 1, weight="weight")
+    except nx.NetworkXNoPath as error:
+        raise RoutePlanningError(
+            f"no collision-free path from ({origin[0]:.2f}, {origin[1]:.2f}) to "
+            f"({target[0]:.2f}, {target[1]:.2f})"
+        ) from error
+    return [nodes[i] for i in path]

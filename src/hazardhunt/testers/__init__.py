@@ -1,0 +1,1 @@
+"""Search methods that choose the human's actions."""

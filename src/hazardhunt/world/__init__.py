@@ -1,0 +1,1 @@
+"""The simulated workplace: geometry, floor map, scenarios and kinematics (pure functions)."""

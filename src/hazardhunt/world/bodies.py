@@ -1,0 +1,48 @@
+"""Physical parameters of the two bodies on the floor: the robot (AGV) and the human."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """The AGV: a rectangle on a unicycle base (SPEC 2).
+
+    The pose (x, y, heading) is the centre of the rectangle; heading points along its long axis.
+    """
+
+    length: float = 0.64
+    """Length along the heading, in m."""
+    width: float = 0.5
+    """Width across the heading, in m."""
+    max_speed: float = 1.2
+    """Largest forward speed, in m/s (the robot never drives backwards)."""
+    max_yaw_rate: float = 0.5
+    """Largest absolute turn rate, in rad/s."""
+    max_acceleration: float = 1.0
+    """Largest absolute change of speed, in m/s^2."""
+    max_yaw_acceleration: float = 3.0
+    """Largest absolute change of turn rate, in rad/s^2."""
+    emergency_deceleration: float = 7.5
+    """Braking deceleration of the safety layer's emergency stop, in m/s^2."""
+    goal_tolerance: float = 0.3
+    """Distance to the goal at which the robot has arrived, in m."""
+
+    @property
+    def half_diagonal(self) -> float:
+        """Radius of the smallest disc around the rectangle, in m."""
+        return math.hypot(self.length / 2, self.width / 2)
+
+
+@dataclass(frozen=True)
+class HumanParams:
+    """The simulated human: a disc on unicycle kinematics (SPEC 2)."""
+
+    radius: float = 0.25
+    """Radius of the disc, in m."""
+    max_speed: float = 1.5
+    """Largest walking speed, in m/s."""
+    max_turn_rate: float = math.pi / 2
+    """Largest absolute turn rate, in rad/s."""

@@ -1,0 +1,99 @@
+"""The shop floor: walls, shelf blocks and camera-blind zones, as polygons."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hazardhunt.world.geometry import (
+    FloatArray,
+    nearest_points_on_segments,
+    point_in_polygon,
+    polygon_edges,
+)
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static obstacle (wall or shelf block) that blocks the human and the robot."""
+
+    name: str
+    polygon: FloatArray
+    """Shape (K, 2): vertices counter-clockwise, in m."""
+    kind: str = "shelf"
+    """``"wall"`` or ``"shelf"``."""
+
+
+@dataclass(frozen=True)
+class FloorMap:
+    """A shop floor: its extent, its static obstacles and the zones the cameras do not see."""
+
+    name: str
+    width: float
+    """Extent east, in m (the floor spans x in [0, width])."""
+    height: float
+    """Extent north, in m (the floor spans y in [0, height])."""
+    obstacles: tuple[Obstacle, ...]
+    blind_zones: tuple[FloatArray, ...] = ()
+    """Polygons (K, 2) where the tracking cameras do not see the human."""
+    edges: FloatArray = field(init=False, repr=False, compare=False)
+    """All obstacle edges, shape (E, 2, 2), for fast clearance queries."""
+    edge_owner: NDArray[np.intp] = field(init=False, repr=False, compare=False)
+    """Shape (E,): index of the obstacle each edge belongs to."""
+
+    def __post_init__(self) -> None:
+        polygons = [o.polygon for o in self.obstacles]
+        owners = [np.full(len(p), i, dtype=np.intp) for i, p in enumerate(polygons)]
+        object.__setattr__(self, "edges", polygon_edges(polygons))
+        object.__setattr__(
+            self, "edge_owner", np.concatenate(owners) if owners else np.zeros(0, dtype=np.intp)
+        )
+
+    def inside_obstacle(self, point: FloatArray) -> bool:
+        """Whether a point lies strictly inside any obstacle (even-odd rule, all at once)."""
+        if len(self.edges) == 0:
+            return False
+        px, py = float(point[0]), float(point[1])
+        start, end = self.edges[:, 0, :], self.edges[:, 1, :]
+        straddles = (start[:, 1] > py) != (end[:, 1] > py)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            crossing_x = start[:, 0] + (py - start[:, 1]) * (end[:, 0] - start[:, 0]) / (
+                end[:, 1] - start[:, 1]
+            )
+        hits = self.edge_owner[straddles & (px < crossing_x)]
+        return bool(np.any(np.bincount(hits, minlength=len(self.obstacles)) % 2))
+
+    def boundary_distance(self, point: FloatArray) -> float:
+        """Distance from a point to the nearest obstacle edge, in m (inf without obstacles)."""
+        if len(self.edges) == 0:
+            return float("inf")
+        nearest = nearest_points_on_segments(point, self.edges)
+        return float(np.min(np.hypot(*(nearest - point).T)))
+
+    def obstacle_clearance(self, point: FloatArray) -> float:
+        """Distance from a point to the nearest obstacle boundary, negative inside one, in m."""
+        distance = self.boundary_distance(point)
+        return -distance if self.inside_obstacle(point) else distance
+
+    def nearest_obstacle_point(self, point: FloatArray) -> FloatArray:
+        """The point on any obstacle boundary nearest to ``point``."""
+        nearest = nearest_points_on_segments(point, self.edges)
+        index = int(np.argmin(np.hypot(*(nearest - point).T)))
+        return np.asarray(nearest[index], dtype=np.float64)
+
+    def disc_blocked(self, center: FloatArray, radius: float) -> bool:
+        """Whether a disc overlaps an obstacle or leaves the floor."""
+        if not self.on_floor(center, radius):
+            return True
+        return self.boundary_distance(center) < radius or self.inside_obstacle(center)
+
+    def on_floor(self, point: FloatArray, margin: float = 0.0) -> bool:
+        """Whether a point lies on the floor at least ``margin`` from its outer edge."""
+        x, y = float(point[0]), float(point[1])
+        return margin <= x <= self.width - margin and margin <= y <= self.height - margin
+
+    def in_blind_zone(self, point: FloatArray) -> bool:
+        """Whether the cameras cannot see a point."""
+        return any(point_in_polygon(point, zone) for zone in self.blind_zones)

@@ -1,0 +1,110 @@
+"""Unicycle kinematics of the human and the robot over one physics step (pure functions)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.floor import FloorMap
+from hazardhunt.world.geometry import FloatArray
+
+
+@dataclass(frozen=True)
+class HumanMotion:
+    """The human after one physics step."""
+
+    position: FloatArray
+    """m"""
+    heading: float
+    """rad"""
+    velocity: FloatArray
+    """Actual velocity over the step (zero when blocked), in m/s."""
+    blocked: bool
+    """True when an obstacle shortened the step."""
+
+
+def step_human(
+    position: FloatArray,
+    heading: float,
+    speed: float,
+    turn_rate: float,
+    dt: float,
+    floor: FloorMap,
+    radius: float,
+) -> HumanMotion:
+    """Move the human disc for ``dt`` seconds; walls and shelves block it.
+
+    At contact the human slides along the obstacle (the part of the step that points into it is
+    removed); where sliding is blocked too (a corner), it stops. It never passes through.
+    """
+    new_heading = heading + turn_rate * dt
+    mid_heading = heading + 0.5 * turn_rate * dt
+    step = speed * dt * np.array([math.cos(mid_heading), math.sin(mid_heading)])
+    target = position + step
+    if not floor.disc_blocked(target, radius):
+        return HumanMotion(target, new_heading, step / dt, False)
+    nearest = floor.nearest_obstacle_point(position)
+    away = position - nearest
+    norm = float(np.hypot(*away))
+    if norm > 1e-12:
+        normal = away / norm
+        slide = step - min(float(np.dot(step, normal)), 0.0) * normal
+        target = position + slide
+        if not floor.disc_blocked(target, radius):
+            return HumanMotion(target, new_heading, slide / dt, True)
+    return HumanMotion(position.copy(), new_heading, np.zeros(2), True)
+
+
+@dataclass(frozen=True)
+class RobotMotion:
+    """The robot after one physics step."""
+
+    x: float
+    y: float
+    heading: float
+    speed: float
+    yaw_rate: float
+
+
+def step_robot(
+    x: float,
+    y: float,
+    heading: float,
+    speed: float,
+    yaw_rate: float,
+    commanded_speed: float,
+    commanded_yaw_rate: float,
+    dt: float,
+    params: RobotParams,
+    emergency_stop: bool = False,
+) -> RobotMotion:
+    """Advance the robot for ``dt`` seconds towards the commanded speeds.
+
+    The speeds move towards the command no faster than the acceleration limits allow and stay
+    within their bounds. Under an emergency stop the robot brakes at the emergency deceleration
+    and stops turning at once. Position and heading integrate the mean speeds of the step (exact
+    for straight motion under constant acceleration).
+    """
+    if emergency_stop:
+        new_speed = max(speed - params.emergency_deceleration * dt, 0.0)
+        new_yaw_rate = 0.0
+    else:
+        speed_step = params.max_acceleration * dt
+        yaw_step = params.max_yaw_acceleration * dt
+        new_speed = speed + min(max(commanded_speed - speed, -speed_step), speed_step)
+        new_speed = min(max(new_speed, 0.0), params.max_speed)
+        new_yaw_rate = yaw_rate + min(max(commanded_yaw_rate - yaw_rate, -yaw_step), yaw_step)
+        new_yaw_rate = min(max(new_yaw_rate, -params.max_yaw_rate), params.max_yaw_rate)
+    mean_speed = 0.5 * (speed + new_speed)
+    mean_yaw_rate = 0.5 * (yaw_rate + new_yaw_rate)
+    mid_heading = heading + 0.5 * mean_yaw_rate * dt
+    return RobotMotion(
+        x=x + mean_speed * dt * math.cos(mid_heading),
+        y=y + mean_speed * dt * math.sin(mid_heading),
+        heading=heading + mean_yaw_rate * dt,
+        speed=new_speed,
+        yaw_rate=new_yaw_rate,
+    )

@@ -1,0 +1,242 @@
+"""Scenarios as data: a floor map file and a scenario file (TOML), validated on load.
+
+A scenario names its map (a path relative to the scenario file, or an inline ``[map]`` table),
+the robot's start pose, waypoints and goal, and the human's start pose. Every error names the
+file, the field and what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from hazardhunt.world.floor import FloorMap, Obstacle
+from hazardhunt.world.geometry import FloatArray, polygon_area, segments_intersect
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+BUILTIN_SCENARIOS = ("crossing", "head-on", "overtaking")
+
+
+class ScenarioError(ValueError):
+    """A scenario or map file that cannot be used; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A position and heading on the floor."""
+
+    x: float
+    """m"""
+    y: float
+    """m"""
+    heading: float
+    """rad, counter-clockwise from east"""
+
+    @property
+    def position(self) -> FloatArray:
+        """(x, y) as an array, in m."""
+        return np.array([self.x, self.y])
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """An initial state on a floor: where the robot starts and must go, where the human starts."""
+
+    name: str
+    floor: FloorMap
+    robot_start: Pose
+    waypoints: FloatArray
+    """Shape (K, 2): points the robot's route passes through, in order, in m."""
+    goal: FloatArray
+    """Shape (2,): the robot's goal, in m."""
+    human_start: Pose
+    description: str = ""
+    source: str = ""
+    """The file the scenario was loaded from."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _PointSpec(_Strict):
+    x: float
+    y: float
+
+
+class _PoseSpec(_PointSpec):
+    heading_deg: float = 0.0
+
+
+Vertex = tuple[float, float]
+
+
+def _check_polygon(polygon: list[Vertex]) -> list[Vertex]:
+    vertices = np.asarray(polygon, dtype=np.float64)
+    if not np.all(np.isfinite(vertices)):
+        raise ValueError("vertices must be finite numbers")
+    if abs(polygon_area(vertices)) < 1e-9:
+        raise ValueError("polygon has no area")
+    count = len(vertices)
+    for i in range(count):
+        for j in range(i + 2, count):
+            if i == 0 and j == count - 1:
+                continue
+            if segments_intersect(
+                vertices[i], vertices[(i + 1) % count], vertices[j], vertices[(j + 1) % count]
+            ):
+                raise ValueError(f"polygon edges {i} and {j} cross each other")
+    return polygon
+
+
+PolygonSpec = Annotated[list[Vertex], Field(min_length=3)]
+
+
+class _ObstacleSpec(_Strict):
+    name: str
+    kind: Literal["wall", "shelf"] = "shelf"
+    polygon: PolygonSpec
+
+    _polygon_ok = field_validator("polygon")(_check_polygon)
+
+
+class _BlindZoneSpec(_Strict):
+    name: str = ""
+    polygon: PolygonSpec
+
+    _polygon_ok = field_validator("polygon")(_check_polygon)
+
+
+class _MapSpec(_Strict):
+    name: str
+    width: float = Field(gt=0)
+    height: float = Field(gt=0)
+    obstacles: list[_ObstacleSpec] = []
+    blind_zones: list[_BlindZoneSpec] = []
+
+
+class _RobotSpec(_Strict):
+    start: _PoseSpec
+    waypoints: list[_PointSpec] = []
+    goal: _PointSpec
+
+
+class _HumanSpec(_Strict):
+    start: _PoseSpec
+
+
+class _ScenarioSpec(_Strict):
+    name: str
+    description: str = ""
+    map: str | _MapSpec
+    robot: _RobotSpec
+    human: _HumanSpec
+
+
+def builtin_scenario_path(name: str) -> Path:
+    """Path of a built-in scenario file."""
+    return Path(str(resources.files("hazardhunt") / "scenarios" / f"{name}.toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name (``crossing``, ``head-on``, ``overtaking``) or a file.
+
+    Raises:
+        ScenarioError: The file is missing, is not valid TOML, or a field is wrong.
+    """
+    if str(name_or_path) in BUILTIN_SCENARIOS:
+        path = builtin_scenario_path(str(name_or_path))
+    else:
+        path = Path(name_or_path)
+        if not path.exists():
+            raise ScenarioError(
+                f"{path}: no such scenario file (built-in scenarios: "
+                f"{', '.join(BUILTIN_SCENARIOS)})"
+            )
+    spec = _parse(path, _ScenarioSpec)
+    if isinstance(spec.map, str):
+        map_path = (path.parent / spec.map).resolve()
+        if not map_path.exists():
+            raise ScenarioError(f"{path}: map: no such map file {spec.map!r}")
+        floor = _build_floor(_parse(map_path, _MapSpec))
+    else:
+        floor = _build_floor(spec.map)
+    scenario = Scenario(
+        name=spec.name,
+        description=spec.description,
+        floor=floor,
+        robot_start=_pose(spec.robot.start),
+        waypoints=np.array([[p.x, p.y] for p in spec.robot.waypoints]).reshape(-1, 2),
+        goal=np.array([spec.robot.goal.x, spec.robot.goal.y]),
+        human_start=_pose(spec.human.start),
+        source=str(path),
+    )
+    _check_placement(scenario, path)
+    return scenario
+
+
+def _parse(path: Path, model: type[_Strict]) -> Any:
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise ScenarioError(f"{path}: not valid TOML: {error}") from error
+    except OSError as error:
+        raise ScenarioError(f"{path}: cannot be read: {error.strerror}") from error
+    try:
+        return model.model_validate(data)
+    except ValidationError as error:
+        first = error.errors()[0]
+        field = ".".join(str(part) for part in first["loc"]) or "(top level)"
+        more = f" (and {error.error_count() - 1} more problems)" if error.error_count() > 1 else ""
+        raise ScenarioError(f"{path}: {field}: {first['msg']}{more}") from error
+
+
+def _pose(spec: _PoseSpec) -> Pose:
+    return Pose(spec.x, spec.y, math.radians(spec.heading_deg))
+
+
+def _build_floor(spec: _MapSpec) -> FloorMap:
+    def counter_clockwise(polygon: list[Vertex]) -> FloatArray:
+        vertices = np.asarray(polygon, dtype=np.float64)
+        return vertices if polygon_area(vertices) > 0 else vertices[::-1].copy()
+
+    return FloorMap(
+        name=spec.name,
+        width=spec.width,
+        height=spec.height,
+        obstacles=tuple(
+            Obstacle(o.name, counter_clockwise(o.polygon), o.kind) for o in spec.obstacles
+        ),
+        blind_zones=tuple(counter_clockwise(zone.polygon) for zone in spec.blind_zones),
+    )
+
+
+def _check_placement(scenario: Scenario, path: Path) -> None:
+    floor = scenario.floor
+    points = {
+        "robot.start": scenario.robot_start.position,
+        "robot.goal": scenario.goal,
+        "human.start": scenario.human_start.position,
+        **{f"robot.waypoints.{i}": p for i, p in enumerate(scenario.waypoints)},
+    }
+    for field, point in points.items():
+        if not floor.on_floor(point):
+            raise ScenarioError(
+                f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies off the "
+                f"{floor.width:g} m x {floor.height:g} m floor"
+            )
+        if floor.inside_obstacle(point):
+            raise ScenarioError(
+                f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
+            )

@@ -1,0 +1,80 @@
+import math
+
+import numpy as np
+import pytest
+
+from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.kinematics import step_human, step_robot
+from hazardhunt.world.scenario import load_scenario
+
+FLOOR = load_scenario("crossing").floor
+
+
+def walk(position, heading, speed, turn_rate, seconds):
+    position = np.array(position, dtype=float)
+    for _ in range(round(seconds / 0.05)):
+        motion = step_human(position, heading, speed, turn_rate, 0.05, FLOOR, 0.25)
+        position, heading = motion.position, motion.heading
+    return position, heading
+
+
+def test_human_walks_straight_in_free_space():
+    position, _ = walk((10.0, 10.0), 0.0, 1.0, 0.0, 1.0)
+    assert position == pytest.approx([11.0, 10.0])
+
+
+def test_human_is_stopped_by_a_shelf_and_never_enters_it():
+    # Walking south from the main aisle into shelf block SW-2 (top face at y = 8.5).
+    position, _ = walk((5.0, 10.0), -math.pi / 2, 1.5, 0.0, 5.0)
+    assert position[1] >= 8.5 + 0.25 - 1e-9
+    assert FLOOR.obstacle_clearance(position) >= 0.25 - 1e-9
+
+
+def test_human_slides_along_a_wall_when_walking_into_it_at_an_angle():
+    # Heading south-east into the shelf top face: the eastward part of the motion survives.
+    position, _ = walk((3.0, 9.5), -math.pi / 4, 1.5, 0.0, 3.0)
+    assert position[1] == pytest.approx(8.75, abs=0.08)
+    assert position[0] > 5.5
+
+
+def test_robot_respects_acceleration_and_speed_limits():
+    params = RobotParams()
+    state = (0.0, 0.0, 0.0, 0.0, 0.0)
+    motion = step_robot(*state, 5.0, 5.0, 0.05, params)
+    assert motion.speed == pytest.approx(0.05)  # 1 m/s^2 for 0.05 s
+    assert motion.yaw_rate == pytest.approx(0.15)  # 3 rad/s^2 for 0.05 s
+    for _ in range(100):
+        motion = step_robot(
+            motion.x,
+            motion.y,
+            motion.heading,
+            motion.speed,
+            motion.yaw_rate,
+            5.0,
+            5.0,
+            0.05,
+            params,
+        )
+    assert motion.speed == pytest.approx(1.2)
+    assert motion.yaw_rate == pytest.approx(0.5)
+
+
+def test_emergency_stop_brakes_at_7_5_and_stops_turning():
+    motion = step_robot(0, 0, 0, 1.0, 0.3, 1.0, 0.3, 0.05, RobotParams(), emergency_stop=True)
+    assert motion.speed == pytest.approx(1.0 - 7.5 * 0.05)
+    assert motion.yaw_rate == 0.0
+    # From 1 m/s the robot stands within three physics steps and never backs up.
+    for _ in range(3):
+        motion = step_robot(
+            motion.x,
+            motion.y,
+            motion.heading,
+            motion.speed,
+            0.0,
+            1.0,
+            0.0,
+            0.05,
+            RobotParams(),
+            True,
+        )
+    assert motion.speed == 0.0

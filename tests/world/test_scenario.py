@@ -1,0 +1,88 @@
+import math
+
+import numpy as np
+import pytest
+
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError, load_scenario
+
+
+@pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
+def test_builtin_scenarios_load_on_one_shared_map(name):
+    scenario = load_scenario(name)
+    assert scenario.name == name
+    assert scenario.floor.name == "shopfloor"
+    assert (scenario.floor.width, scenario.floor.height) == (20.0, 20.0)
+    assert not scenario.floor.disc_blocked(scenario.human_start.position, 0.25)
+
+
+def test_initial_states_match_their_names():
+    crossing, head_on, overtaking = (load_scenario(n) for n in BUILTIN_SCENARIOS)
+    assert abs(crossing.human_start.heading - crossing.robot_start.heading) == pytest.approx(
+        math.pi / 2
+    )
+    assert abs(head_on.human_start.heading - head_on.robot_start.heading) == pytest.approx(math.pi)
+    assert overtaking.human_start.heading == overtaking.robot_start.heading
+    assert overtaking.human_start.x > overtaking.robot_start.x  # the robot starts behind
+
+
+def write(tmp_path, text, name="bad.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+SHOPFLOOR = str(load_scenario("crossing").source).replace("crossing.toml", "shopfloor.toml")
+
+VALID = f"""
+name = "mine"
+map = "{SHOPFLOOR}"
+[robot]
+start = {{ x = 2.0, y = 10.0, heading_deg = 0.0 }}
+goal = {{ x = 18.0, y = 10.0 }}
+[human]
+start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
+"""
+
+
+def test_a_user_scenario_file_loads(tmp_path):
+    scenario = load_scenario(write(tmp_path, VALID))
+    assert scenario.name == "mine"
+    assert scenario.goal == pytest.approx(np.array([18.0, 10.0]))
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        (("x = 2.0, y = 10.0", 'x = "two", y = 10.0'), "robot.start.x"),
+        (("heading_deg = 90.0", "heading_deg = 90.0, speed = 3"), "human.start.speed"),
+        (('name = "mine"', 'name = "mine"\ncolour = "red"'), "colour"),
+        (("[human]", "[humans]"), "human"),
+        (("x = 10.0, y = 5.0", "x = 5.0, y = 3.0"), "human.start: (5, 3) lies inside an obstacle"),
+        (("x = 18.0, y = 10.0", "x = 25.0, y = 10.0"), "robot.goal: (25, 10) lies off"),
+        (("name = ", "name = = "), "not valid TOML"),
+    ],
+)
+def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):
+    path = write(tmp_path, VALID.replace(*change))
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(path)
+    message = str(caught.value)
+    assert str(path) in message
+    assert expected in message
+
+
+def test_a_missing_scenario_says_which_ones_exist(tmp_path):
+    with pytest.raises(ScenarioError, match="crossing, head-on, overtaking"):
+        load_scenario(tmp_path / "nope.toml")
+
+
+def test_a_bad_map_names_the_map_file_and_the_obstacle(tmp_path):
+    write(
+        tmp_path,
+        'name = "m"\nwidth = 10.0\nheight = 10.0\n[[obstacles]]\nname = "bow tie"\n'
+        "polygon = [[0, 0], [2, 2], [2, 0], [0, 1]]\n",
+        "map.toml",
+    )
+    path = write(tmp_path, VALID.replace(SHOPFLOOR, "map.toml"))
+    with pytest.raises(ScenarioError, match=r"map\.toml: obstacles\.0\.polygon: .*cross"):
+        load_scenario(path)
