@@ -82,8 +82,10 @@ def main() -> None:
         f"{'solver':8} {'solves':>7} {'failed':>6} {'median':>8} {'p95':>8} {'p99':>8} "
         f"{'max':>8} {'solve %':>8} {'episodes/s':>10} {'steps/s':>8}"
     )
-    print(f"closed loop, random human, {args.episodes} episodes x {len(BUILTIN_SCENARIOS)} "
-          f"scenarios, field {args.field}; solve times in ms")  # fmt: skip
+    print(
+        f"closed loop, random human, {args.episodes} episodes x {len(BUILTIN_SCENARIOS)} "
+        f"scenarios, field {args.field}; solve times in ms"
+    )
     print(header)
     for r in results:
         ms = r["solve_ms"]
@@ -96,8 +98,10 @@ def main() -> None:
     if len(results) > 1:
         base = results[0]["solve_ms"]["median"]
         for r in results[1:]:
-            print(f"median ratio {r['solver']} / {results[0]['solver']}: "
-                  f"{r['solve_ms']['median'] / base:.2f}")  # fmt: skip
+            print(
+                f"median ratio {r['solver']} / {results[0]['solver']}: "
+                f"{r['solve_ms']['median'] / base:.2f}"
+            )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     report = {
         "machine": {"python": platform.python_version(), "processor": platform.machine()},

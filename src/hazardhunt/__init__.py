@@ -10,6 +10,10 @@ Importing the package registers the environment ``hazardhunt/AGV-v0`` with Gymna
 
 from __future__ import annotations
 
+import functools
+import hashlib
+from pathlib import Path
+
 import gymnasium
 
 __version__ = "0.1.0"
@@ -19,4 +23,20 @@ ENV_ID = "hazardhunt/AGV-v0"
 if ENV_ID not in gymnasium.registry:
     gymnasium.register(id=ENV_ID, entry_point="hazardhunt.env.agv:AGVEnv")
 
-__all__ = ["ENV_ID", "__version__"]
+
+@functools.cache
+def source_digest() -> str:
+    """A short hash of the package's code and scenario data.
+
+    Recorded with every run: results of one campaign should come from one version of the
+    code, and the version number alone does not change with every edit.
+    """
+    package = Path(__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.toml")]):
+        digest.update(path.relative_to(package).as_posix().encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+__all__ = ["ENV_ID", "__version__", "source_digest"]

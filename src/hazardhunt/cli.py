@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, TypeVar
 
 import numpy as np
 import typer
@@ -11,6 +13,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from hazardhunt.campaign.config import ConfigError
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
@@ -20,6 +23,8 @@ app = typer.Typer(
     add_completion=False,
 )
 console = Console()
+err_console = Console(stderr=True, soft_wrap=True)
+T = TypeVar("T")
 
 
 @app.callback()
@@ -77,12 +82,123 @@ def demo(
     console.print(f"Pictures written to [bold]{out.resolve()}[/bold]")
 
 
+@app.command("run")
+def run_command(
+    scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
+    field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
+    tester: Annotated[str, typer.Option(help="random, ppo-acc or ppo-max.")],
+    out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
+    episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
+    seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
+    decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,
+    solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
+    json_output: Annotated[
+        bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
+    ] = False,
+) -> None:
+    """Run one tester on one scenario and field setting for a budget of episodes."""
+    from hazardhunt.campaign.config import EnvOptions, RunConfig
+    from hazardhunt.campaign.runner import run_into
+
+    config = _validated(
+        lambda: RunConfig(
+            scenario=scenario,
+            field=field,
+            tester=tester,
+            seed=seed,
+            episodes=episodes,
+            env=EnvOptions(decision_period=decision_period, solver=solver),
+        )
+    )
+    summary = run_into(config, out, console=err_console)
+    if json_output:
+        print(json.dumps(summary))
+    else:
+        _print_run_summary(summary, out)
+
+
+@app.command()
+def replay(
+    run_directory: Annotated[Path, typer.Argument(help="A run directory.")],
+    failure: Annotated[int, typer.Option(help="The failure's id (its episode index).")],
+    gif: Annotated[Path | None, typer.Option(help="Write an animation of the replay.")] = None,
+) -> None:
+    """Re-simulate a recorded failure and confirm it ends the same way at the same time."""
+    from hazardhunt.campaign.replay import replay_failure
+
+    result = replay_failure(run_directory, failure)
+    verdict = "[green]reproduced[/green]" if result.matches else "[red]NOT reproduced[/red]"
+    console.print(
+        f"failure {failure}: recorded {result.recorded_outcome} at "
+        f"{result.recorded_sim_time:.2f} s, replayed {result.replayed_outcome} at "
+        f"{result.replayed_sim_time:.2f} s: {verdict}"
+    )
+    if gif is not None:
+        from hazardhunt.env.rendering import animate_episode
+
+        animate_episode(gif, result.env, title=f"failure {failure}")
+        console.print(f"animation written to [bold]{gif}[/bold]")
+    if not result.matches:
+        raise typer.Exit(1)
+
+
+@app.command()
+def campaign(
+    file: Annotated[Path, typer.Argument(help="A campaign file (TOML).")],
+    out: Annotated[Path, typer.Option(help="The campaign directory (created or resumed).")],
+    workers: Annotated[int, typer.Option(help="Runs executed at once.")] = 1,
+    executor: Annotated[str, typer.Option(help="local (process pool) or ray.")] = "local",
+    address: Annotated[
+        str | None, typer.Option(help="Address of an existing Ray cluster (with --executor ray).")
+    ] = None,
+) -> None:
+    """Run every run of a campaign file; run it again to finish an interrupted campaign."""
+    from hazardhunt.campaign.campaign import run_campaign
+    from hazardhunt.campaign.config import load_campaign
+
+    if executor not in ("local", "ray"):
+        raise typer.BadParameter("use local or ray", param_hint="--executor")
+    if workers < 1:
+        raise typer.BadParameter("must be at least 1", param_hint="--workers")
+    if address is not None and executor != "ray":
+        raise typer.BadParameter("only with --executor ray", param_hint="--address")
+    config = load_campaign(file)
+    run_campaign(config, out, workers=workers, executor=executor, address=address, console=console)
+
+
+def _validated(build: Callable[[], T]) -> T:
+    from pydantic import ValidationError
+
+    from hazardhunt.world.scenario import format_validation_error
+
+    try:
+        return build()
+    except ValidationError as error:
+        raise ConfigError(format_validation_error(error)) from None
+
+
+def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
+    table = Table("episodes", "failures", "safe contacts", "stalls", "wall time (s)", "episodes/s")
+    table.add_row(
+        str(summary["episodes"]),
+        str(summary["failures"]),
+        str(summary["safe_contacts"]),
+        str(summary["stalls"]),
+        f"{summary['wall_time_s']:.1f}",
+        f"{summary['episodes_per_s']:.2f}",
+    )
+    console.print(table)
+    console.print(f"results in [bold]{out.resolve()}[/bold]")
+
+
 def run() -> None:
-    """Entry point that turns input errors into one clear line."""
+    """Entry point that turns input errors into one clear line on stderr and exit code 2."""
+    from hazardhunt.campaign.replay import ReplayError
+
     try:
         app()
-    except ScenarioError as error:
-        console.print(f"[red]error:[/red] {error}")
+    except (ScenarioError, ConfigError, ReplayError) as error:
+        err_console.print(f"[red]error:[/red] {error}")
         raise SystemExit(2) from None
 
 

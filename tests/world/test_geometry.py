@@ -5,6 +5,7 @@ import pytest
 
 from hazardhunt.world.geometry import (
     disc_rectangle_clearance,
+    distances_to_segments,
     point_half_disc_distance,
     point_in_polygon,
     rectangle_corners,
@@ -60,3 +61,9 @@ def test_rectangle_corners_and_point_in_polygon():
     assert corners[0] == pytest.approx([2.0, 2.5])
     assert point_in_polygon(np.array([1.0, 2.0]), corners)
     assert not point_in_polygon(np.array([2.5, 2.0]), corners)
+
+
+def test_distances_to_segments_of_many_points_at_once():
+    edges = np.array([[[0.0, 0.0], [4.0, 0.0]], [[4.0, 0.0], [4.0, 3.0]]])
+    points = np.array([[2.0, 1.0], [5.0, 1.5], [7.0, 7.0], [4.0, 0.0]])
+    assert distances_to_segments(points, edges) == pytest.approx([1.0, 1.0, 5.0, 0.0])

@@ -284,15 +284,27 @@ class AGVEnv(gym.Env[ObsType, ActType]):
 
         x, y, heading, robot_speed, yaw_rate = self._robot
         motion = step_robot(
-            x, y, heading, robot_speed, yaw_rate,
-            self._command.speed, self._command.yaw_rate, dt, self.robot_params,
+            x,
+            y,
+            heading,
+            robot_speed,
+            yaw_rate,
+            self._command.speed,
+            self._command.yaw_rate,
+            dt,
+            self.robot_params,
             emergency_stop=self._stopping,
-        )  # fmt: skip
+        )
         self._robot = [motion.x, motion.y, motion.heading, motion.speed, motion.yaw_rate]
         human = step_human(
-            self._human_position, self._human_heading, speed, turn_rate, dt,
-            self.scenario.floor, self.human_params.radius,
-        )  # fmt: skip
+            self._human_position,
+            self._human_heading,
+            speed,
+            turn_rate,
+            dt,
+            self.scenario.floor,
+            self.human_params.radius,
+        )
         self._human_position, self._human_heading = human.position, human.heading
         self._human_velocity = human.velocity
         self._steps += 1

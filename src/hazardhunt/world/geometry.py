@@ -103,6 +103,20 @@ def nearest_points_on_segments(point: FloatArray, edges: FloatArray) -> FloatArr
     return np.asarray(start + t[:, None] * direction, dtype=np.float64)
 
 
+def distances_to_segments(points: FloatArray, edges: FloatArray) -> FloatArray:
+    """For each point of ``points`` (P, 2), its distance to the nearest segment of ``edges``
+    (E, 2, 2): shape (P,), inf without segments."""
+    if len(edges) == 0:
+        return np.full(len(points), np.inf)
+    start = edges[:, 0, :]
+    direction = edges[:, 1, :] - start
+    length_sq = np.einsum("ej,ej->e", direction, direction)
+    offset = points[:, None, :] - start[None, :, :]
+    t = np.einsum("pej,ej->pe", offset, direction) / np.where(length_sq > 0, length_sq, 1.0)
+    gap = offset - np.clip(t, 0.0, 1.0)[..., None] * direction[None, :, :]
+    return np.asarray(np.sqrt(np.min(np.einsum("pej,pej->pe", gap, gap), axis=1)), dtype=np.float64)
+
+
 def point_in_polygon(point: FloatArray, polygon: FloatArray) -> bool:
     """Whether a point lies strictly inside a simple polygon (even-odd rule)."""
     px, py = float(point[0]), float(point[1])

@@ -196,10 +196,16 @@ def _parse(path: Path, model: type[_Strict]) -> Any:
     try:
         return model.model_validate(data)
     except ValidationError as error:
-        first = error.errors()[0]
-        field = ".".join(str(part) for part in first["loc"]) or "(top level)"
-        more = f" (and {error.error_count() - 1} more problems)" if error.error_count() > 1 else ""
-        raise ScenarioError(f"{path}: {field}: {first['msg']}{more}") from error
+        raise ScenarioError(f"{path}: {format_validation_error(error)}") from error
+
+
+def format_validation_error(error: ValidationError) -> str:
+    """The first problem of a pydantic error as ``field: message`` (and how many more)."""
+    first = error.errors()[0]
+    field = ".".join(str(part) for part in first["loc"]) or "(top level)"
+    message = str(first["msg"]).removeprefix("Value error, ")
+    more = error.error_count() - 1
+    return f"{field}: {message}" + (f" (and {more} more problems)" if more else "")
 
 
 def _pose(spec: _PoseSpec) -> Pose:

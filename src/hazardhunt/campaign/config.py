@@ -1,0 +1,179 @@
+"""Typed, validated configuration of a run and of a campaign (a grid of runs)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.world.scenario import format_validation_error
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+TESTER_NAMES = ("random", "ppo-acc", "ppo-max")
+"""The built-in testers."""
+
+
+class ConfigError(ValueError):
+    """A run or campaign configuration that cannot be used; the message says what is wrong."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class EnvOptions(_Strict):
+    """Environment parameters a run or campaign may override (defaults from SPEC)."""
+
+    decision_period: float = Field(default=2.0, gt=0)
+    """Time the human holds each action, in s (a multiple of 0.2 s)."""
+    solver: Literal["fatrop", "ipopt"] = "fatrop"
+    """The NMPC's solver."""
+    episode_duration: float = Field(default=30.0, gt=0)
+    """Simulated time after which an episode times out, in s."""
+    stall_duration: float = Field(default=10.0, gt=0)
+    """Continuous emergency-stop time after which an episode stalls, in s."""
+
+
+def _check_scenario(value: str) -> str:
+    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError, load_scenario
+
+    if value in BUILTIN_SCENARIOS:
+        return value
+    if not value.endswith(".toml"):
+        raise ValueError(
+            f"unknown scenario {value!r}: use one of {', '.join(BUILTIN_SCENARIOS)} or a .toml file"
+        )
+    # Load it now, so that a broken scenario file stops the campaign before any run starts.
+    try:
+        load_scenario(value)
+    except ScenarioError as error:
+        raise ValueError(str(error)) from None
+    return value
+
+
+def _check_field(value: str) -> str:
+    if value not in FIELD_SETTINGS:
+        raise ValueError(f"unknown field {value!r}: use one of {', '.join(FIELD_SETTINGS)}")
+    return value
+
+
+def _check_tester(value: str) -> str:
+    if value not in TESTER_NAMES:
+        raise ValueError(f"unknown tester {value!r}: use one of {', '.join(TESTER_NAMES)}")
+    return value
+
+
+class RunConfig(_Strict):
+    """One tester x one scenario x one field setting x one seed x a budget of episodes."""
+
+    scenario: str
+    """A built-in scenario name or a scenario file."""
+    field: str
+    """Protective-field setting: none, 1.25m or 2m."""
+    tester: str
+    """The search method: random, ppo-acc or ppo-max."""
+    seed: int = Field(ge=0)
+    """Seeds every random choice of the run."""
+    episodes: int = Field(gt=0)
+    """Budget: number of episodes."""
+    env: EnvOptions = EnvOptions()
+    tester_params: dict[str, Any] = {}
+    """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
+
+    _scenario_ok = field_validator("scenario")(_check_scenario)
+    _field_ok = field_validator("field")(_check_field)
+    _tester_ok = field_validator("tester")(_check_tester)
+
+    @property
+    def run_id(self) -> str:
+        """A file-system-safe name for the run, unique within a campaign."""
+        scenario = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(self.scenario).stem)
+        return f"{scenario}__{self.field}__{self.tester}__seed{self.seed}"
+
+
+class CampaignConfig(_Strict):
+    """A grid of runs: every scenario x field x tester x seed, each with ``episodes``."""
+
+    scenarios: list[str] = Field(min_length=1)
+    fields: list[str] = Field(min_length=1)
+    testers: list[str] = Field(min_length=1)
+    seeds: list[int] = Field(min_length=1)
+    episodes: int = Field(gt=0)
+    env: EnvOptions = EnvOptions()
+    tester: dict[str, dict[str, Any]] = {}
+    """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
+
+    @field_validator("scenarios")
+    @classmethod
+    def _scenarios_ok(cls, values: list[str]) -> list[str]:
+        return [_check_scenario(v) for v in values]
+
+    @field_validator("fields")
+    @classmethod
+    def _fields_ok(cls, values: list[str]) -> list[str]:
+        return [_check_field(v) for v in values]
+
+    @field_validator("testers")
+    @classmethod
+    def _testers_ok(cls, values: list[str]) -> list[str]:
+        return [_check_tester(v) for v in values]
+
+    @field_validator("seeds")
+    @classmethod
+    def _seeds_ok(cls, values: list[int]) -> list[int]:
+        if any(v < 0 for v in values):
+            raise ValueError("seeds must be non-negative")
+        if len(set(values)) != len(values):
+            raise ValueError("seeds must be distinct")
+        return values
+
+    @field_validator("tester")
+    @classmethod
+    def _tester_tables_ok(cls, tables: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        for name in tables:
+            _check_tester(name)
+        return tables
+
+    def runs(self) -> list[RunConfig]:
+        """The runs of the grid, in a stable order."""
+        return [
+            RunConfig(
+                scenario=scenario,
+                field=field,
+                tester=tester,
+                seed=seed,
+                episodes=self.episodes,
+                env=self.env,
+                tester_params=self.tester.get(tester, {}),
+            )
+            for scenario in self.scenarios
+            for field in self.fields
+            for tester in self.testers
+            for seed in self.seeds
+        ]
+
+
+def load_campaign(path: Path) -> CampaignConfig:
+    """Read and validate a campaign file.
+
+    Raises:
+        ConfigError: Naming the file, the field and what is wrong.
+    """
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such campaign file") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{path}: not valid TOML: {error}") from error
+    try:
+        return CampaignConfig.model_validate(data)
+    except ValidationError as error:
+        raise ConfigError(f"{path}: {format_validation_error(error)}") from error

@@ -1,0 +1,164 @@
+"""A run's results on disk: Parquet tables that pandas reads, JSON for configuration and summary.
+
+Layout of a run directory::
+
+    config.json          the resolved configuration, package version, seeds
+    episodes.parquet     one row per episode (SPEC 7)
+    failures.parquet     one row per failure: what replays it (scenario, field, seed, actions)
+    trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by failure_id
+    tester/              what the tester learned (the PPO model)
+    summary.json         written last: its presence marks the run complete
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hazardhunt.testers.base import EpisodeRecord
+
+EPISODE_COLUMNS = (
+    "outcome",
+    "decision_steps",
+    "sim_time",
+    "return",
+    "max_risk",
+    "min_clearance",
+    "estop_count",
+    "time_in_field",
+    "wall_time_s",
+    "solves",
+    "failed_commands",
+    "solve_time_mean_s",
+    "solve_time_median_s",
+    "solve_time_max_s",
+    "contact_face",
+)
+"""Columns of ``episodes.parquet`` besides ``episode`` and ``controller_errors``."""
+
+TRAJECTORY_FLUSH = 200
+"""Failures whose trajectories are buffered before a part file is written."""
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON so that a reader sees either the old file or the whole new one."""
+    write_bytes_atomic(path, json.dumps(data, indent=2, default=str).encode())
+
+
+def write_bytes_atomic(path: Path, payload: bytes) -> None:
+    """Write a file via a temporary sibling and an atomic rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(payload)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+class RunStore:
+    """Collects a run's episodes and failures and writes them as Parquet."""
+
+    def __init__(self, directory: Path, replay_keys: dict[str, Any]) -> None:
+        """Args:
+        directory: The run directory (exists).
+        replay_keys: Columns every failure row carries to replay it (scenario, field, seed,
+            decision period).
+        """
+        self.directory = directory
+        self.replay_keys = replay_keys
+        self.episodes: list[dict[str, Any]] = []
+        self.failures: list[dict[str, Any]] = []
+        self._trajectory_rows: list[dict[str, Any]] = []
+        self._buffered_failures = 0
+        self._parts = 0
+        (directory / "trajectories").mkdir(exist_ok=True)
+
+    def add(self, record: EpisodeRecord) -> None:
+        """Store one finished episode."""
+        summary = record.summary
+        row = {"episode": record.index} | {k: summary[k] for k in EPISODE_COLUMNS}
+        row["controller_errors"] = "; ".join(summary["controller_errors"])
+        self.episodes.append(row)
+        if summary["outcome"] != "failure":
+            return
+        self.failures.append(
+            {
+                "failure_id": record.index,
+                "episode": record.index,
+                **self.replay_keys,
+                "outcome": summary["outcome"],
+                "sim_time": summary["sim_time"],
+                "decision_steps": summary["decision_steps"],
+                "contact_face": summary["contact_face"],
+                "max_risk": summary["max_risk"],
+                "actions": record.actions.tolist(),
+            }
+        )
+        for sample in record.trajectory:
+            self._trajectory_rows.append({"failure_id": record.index} | _flat(sample))
+        self._buffered_failures += 1
+        if self._buffered_failures >= TRAJECTORY_FLUSH:
+            self._flush_trajectories()
+
+    @property
+    def failure_count(self) -> int:
+        """Failures stored so far."""
+        return len(self.failures)
+
+    def close(self) -> None:
+        """Write the tables."""
+        self._flush_trajectories()
+        episodes = pd.DataFrame(
+            self.episodes, columns=["episode", *EPISODE_COLUMNS, "controller_errors"]
+        )
+        episodes.to_parquet(self.directory / "episodes.parquet", index=False)
+        failure_columns = [
+            "failure_id",
+            "episode",
+            *self.replay_keys,
+            "outcome",
+            "sim_time",
+            "decision_steps",
+            "contact_face",
+            "max_risk",
+            "actions",
+        ]
+        failures = pd.DataFrame(self.failures, columns=failure_columns)
+        failures.to_parquet(self.directory / "failures.parquet", index=False)
+
+    def _flush_trajectories(self) -> None:
+        if not self._trajectory_rows:
+            return
+        part = self.directory / "trajectories" / f"part-{self._parts:05d}.parquet"
+        pd.DataFrame(self._trajectory_rows).to_parquet(part, index=False)
+        self._parts += 1
+        self._trajectory_rows = []
+        self._buffered_failures = 0
+
+
+def _flat(sample: dict[str, Any]) -> dict[str, Any]:
+    """A trajectory sample with its arrays as flat lists (Parquet list columns)."""
+    flat = dict(sample)
+    for key in ("predicted_human", "planned_positions"):
+        value = flat.get(key)
+        flat[key] = None if value is None else np.asarray(value, dtype=np.float64).ravel().tolist()
+    return flat
+
+
+def read_trajectory(run_directory: Path, failure_id: int) -> pd.DataFrame:
+    """The stored trajectory of one failure, samples in time order."""
+    table = pd.read_parquet(
+        run_directory / "trajectories", filters=[("failure_id", "==", failure_id)]
+    )
+    return table.sort_values("time").reset_index(drop=True)

@@ -1,0 +1,97 @@
+"""The study's baseline: uniform random actions that do not walk the human into a wall.
+
+Each decision draws actions uniformly from the action space until one keeps the human clear of
+every static obstacle over the next decision period (its straight-or-arc path checked at the
+physics step); if none of ``attempts`` draws does, the human turns on the spot at a random rate.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.world.floor import FloorMap
+from hazardhunt.world.geometry import distances_to_segments
+
+
+class RandomTester:
+    """Uniform sampling over the action space, restricted to obstacle-free actions."""
+
+    name = "random"
+    reward: RewardKind = "max"
+
+    def __init__(self, seed: int, attempts: int = 20) -> None:
+        """Args:
+        seed: Seeds the sampling.
+        attempts: Draws per decision before falling back to standing still.
+        """
+        self.seed = seed
+        self.attempts = attempts
+        self.rng = np.random.default_rng(seed)
+
+    def explore(self, env: EpisodeRecorder, episodes: int) -> None:
+        agv = env.agv
+        env.reset(seed=self.seed)
+        while env.episodes_done < episodes:
+            action = self.choose(agv.scenario.floor, agv.human_pose, agv)
+            _, _, terminated, truncated, _ = env.step(action)
+            if (terminated or truncated) and env.episodes_done < episodes:
+                env.reset()
+
+    def choose(
+        self, floor: FloorMap, pose: tuple[float, float, float], agv: Any
+    ) -> NDArray[np.float32]:
+        """One obstacle-free action for a human at ``pose``."""
+        human = agv.human_params
+        for _ in range(self.attempts):
+            action = self.rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
+            speed = 0.5 * (float(action[0]) + 1.0) * human.max_speed
+            turn_rate = float(action[1]) * human.max_turn_rate
+            path = human_path(pose, speed, turn_rate, agv.decision_period, agv.physics_step)
+            if path_is_clear(floor, path, human.radius):
+                return action
+        # Turning on the spot is always clear, and lets a human facing a wall turn away.
+        return np.array([-1.0, self.rng.uniform(-1.0, 1.0)], dtype=np.float32)
+
+    def save(self, directory: Path) -> None:
+        """Nothing is learned; the directory records the sampler's settings."""
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / "random.txt").write_text(f"seed={self.seed}\nattempts={self.attempts}\n")
+
+
+def human_path(
+    pose: tuple[float, float, float], speed: float, turn_rate: float, duration: float, step: float
+) -> NDArray[np.float64]:
+    """Positions of an unblocked human holding (speed, turn rate), one per physics step."""
+    x, y, heading = pose
+    times = np.arange(1, round(duration / step) + 1) * step
+    if abs(turn_rate) < 1e-9:
+        return np.stack(
+            [x + speed * times * math.cos(heading), y + speed * times * math.sin(heading)], axis=1
+        )
+    radius = speed / turn_rate
+    headings = heading + turn_rate * times
+    return np.stack(
+        [
+            x + radius * (np.sin(headings) - math.sin(heading)),
+            y - radius * (np.cos(headings) - math.cos(heading)),
+        ],
+        axis=1,
+    )
+
+
+def path_is_clear(floor: FloorMap, path: NDArray[np.float64], radius: float) -> bool:
+    """Whether a disc following ``path`` stays on the floor and off every obstacle."""
+    if not (
+        np.all(path >= radius)
+        and np.all(path[:, 0] <= floor.width - radius)
+        and np.all(path[:, 1] <= floor.height - radius)
+    ):
+        return False
+    return bool(np.all(distances_to_segments(path, floor.edges) >= radius))

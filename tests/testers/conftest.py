@@ -1,0 +1,40 @@
+"""Short seeded runs of each tester, made once per test session and shared."""
+
+from pathlib import Path
+
+import pytest
+
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.run import execute_run
+
+EPISODES = 24
+SMALL_PPO = {"n_steps": 64, "batch_size": 32}
+"""Small rollouts, so that a 24-episode run (about 200 steps) includes several updates."""
+
+CASES = {
+    # Without a protective field, failures turn up within a few dozen episodes.
+    "random": {"scenario": "overtaking", "field": "none", "tester": "random"},
+    "ppo-acc": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "ppo-acc",
+        "tester_params": SMALL_PPO,
+    },
+}
+
+
+@pytest.fixture(scope="session")
+def seeded_run(tmp_path_factory):
+    """``seeded_run(tester, seed, copy=0)``: the directory of a finished run of ``CASES[tester]``
+    (``copy`` makes an independent second run of the same configuration)."""
+    made: dict[tuple[str, int, int], Path] = {}
+
+    def run(tester: str, seed: int, copy: int = 0) -> Path:
+        key = (tester, seed, copy)
+        if key not in made:
+            directory = tmp_path_factory.mktemp(f"{tester}-seed{seed}-{copy}") / "run"
+            execute_run(RunConfig(**CASES[tester], seed=seed, episodes=EPISODES), directory)
+            made[key] = directory
+        return made[key]
+
+    return run

@@ -1,0 +1,105 @@
+"""PPO testers: the budget, reproducibility, the saved policy and the reward they learn from."""
+
+import json
+from typing import Any
+
+import gymnasium as gym
+import pytest
+from stable_baselines3 import PPO
+
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.run import make_env
+from hazardhunt.env.agv import AGVEnv
+from hazardhunt.testers import make_tester
+from hazardhunt.testers.base import EpisodeRecorder
+from tests.testers.conftest import CASES, SMALL_PPO
+
+
+@pytest.fixture(scope="module")
+def first_run(seeded_run):
+    return seeded_run("ppo-acc", 0)
+
+
+def test_saved_policy_loads_and_acts_in_the_action_space(first_run):
+    model = PPO.load(first_run / "tester" / "ppo.zip", device="cpu")
+    env = AGVEnv("head-on", "none")
+    observation, _ = env.reset(seed=0)
+    action, _ = model.predict(observation, deterministic=True)
+    assert env.action_space.contains(action)
+    env.step(action)
+
+
+def test_effective_hyperparameters_are_saved(first_run):
+    saved = json.loads((first_run / "tester" / "hyperparameters.json").read_text())
+    assert saved["n_steps"] == 64
+    assert saved["batch_size"] == 32
+    assert saved["learning_rate"] == 3e-4  # SB3's default
+    assert saved["seed"] == 0
+    assert saved["device"] == "cpu"
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"learning_rat": 1e-3}, "tester 'ppo-max': unknown parameter 'learning_rat'"),
+        ({"seed": 3}, "tester 'ppo-max': parameter 'seed' is set by hazardhunt"),
+        ({"env": "CartPole-v1"}, "parameter 'env' is set by hazardhunt"),
+        ({"device": "cuda"}, "parameter 'device' is set by hazardhunt"),
+    ],
+)
+def test_bad_parameters_are_clear_errors(params, message):
+    with pytest.raises(ValueError, match=message):
+        make_tester("ppo-max", 0, params)
+
+
+class StepLog(gym.Wrapper):
+    """Keeps every step's reward and info."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.steps: list[tuple[float, dict[str, Any]]] = []
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.steps.append((reward, info))
+        return observation, reward, terminated, truncated, info
+
+
+def explore(name: str, seed: int, episodes: int) -> tuple[EpisodeRecorder, list[list[tuple]]]:
+    """Let tester ``name`` explore a few episodes; returns the recorder and each episode's steps."""
+    tester = make_tester(name, seed, SMALL_PPO)
+    config = RunConfig(**CASES["ppo-acc"] | {"tester": name}, seed=seed, episodes=episodes)
+    log = StepLog(make_env(config, tester.reward))
+    recorder = EpisodeRecorder(log, on_episode=lambda record: None)
+    tester.explore(recorder, episodes)
+    by_episode: list[list[tuple]] = [[]]
+    for reward, info in log.steps:
+        by_episode[-1].append((reward, info))
+        if info["outcome"] is not None:
+            by_episode.append([])
+    return recorder, by_episode[:-1]
+
+
+def test_ppo_acc_learns_from_the_accumulated_risk():
+    recorder, episodes = explore("ppo-acc", seed=0, episodes=2)
+    assert recorder.agv.reward_kind == "acc"
+    for steps in episodes:
+        rewards = [reward for reward, _ in steps]
+        assert rewards == [info["risk_sum"] for _, info in steps]
+        assert sum(rewards) == pytest.approx(steps[-1][1]["summary"]["return"])
+        assert sum(rewards) > 0
+
+
+def test_ppo_max_learns_from_the_episode_maximum_at_its_end():
+    recorder, episodes = explore("ppo-max", seed=0, episodes=2)
+    assert recorder.agv.reward_kind == "max"
+    for steps in episodes:
+        rewards = [reward for reward, _ in steps]
+        assert rewards[:-1] == [0.0] * (len(steps) - 1)
+        assert rewards[-1] == steps[-1][1]["max_risk"] > 0
+
+
+def test_the_first_reset_carries_the_run_seed():
+    recorder, _ = explore("ppo-max", seed=12345, episodes=1)
+    assert recorder.agv.np_random_seed == 12345
+    assert recorder.episodes_done == 1
