@@ -10,6 +10,7 @@ from typing import Annotated, Any, TypeVar
 import numpy as np
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import Progress
 from rich.table import Table
 
@@ -198,7 +199,7 @@ def run() -> None:
     try:
         app()
     except (ScenarioError, ConfigError, ReplayError) as error:
-        err_console.print(f"[red]error:[/red] {error}")
+        err_console.print(f"[red]error:[/red] {escape(str(error))}")
         raise SystemExit(2) from None
 
 

@@ -42,6 +42,7 @@ from typing import Any
 
 from pydantic import ValidationError
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -305,7 +306,9 @@ def _execute(
             ledger.record(outcome)
             display.run_ended(outcome)
             if outcome.summary is None and console is not None:
-                console.print(f"[red]run {outcome.config.run_id} failed:[/red] {outcome.error}")
+                console.print(
+                    f"[red]run {outcome.config.run_id} failed:[/red] {escape(str(outcome.error))}"
+                )
 
         if executor == "ray":
             _execute_on_ray(pending, runs_directory, workers, address, on_outcome)
@@ -561,7 +564,7 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
     console.print(table)
     for entry in summary["runs"]:
         if entry["status"] == "failed":
-            console.print(f"[red]failed:[/red] {entry['run_id']}: {entry['error']}")
+            console.print(f"[red]failed:[/red] {entry['run_id']}: {escape(str(entry['error']))}")
     console.print(
         f"{summary['runs_complete']}/{summary['runs_total']} runs complete, "
         f"{summary['failures']} failures in {summary['episodes']} episodes; "
