@@ -6,6 +6,7 @@ import contextlib
 import fcntl
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from hazardhunt.campaign.config import load_campaign
 from hazardhunt.world.scenario import load_scenario
 from tests.helpers import hazardhunt, run_tables
 
@@ -273,3 +275,37 @@ def test_a_run_that_raises_is_recorded_and_the_others_complete(tmp_path: Path) -
     assert "broken.toml" in failed["error"]
     assert "failed" in result.stdout
     assert (out / "runs" / "head-on__2m__random__seed0" / "summary.json").is_file()
+
+
+def test_runs_made_by_other_code_are_pointed_out_on_resume(
+    campaign_file: Path, reference: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "campaign"
+    shutil.copytree(reference, out)
+    run_id = "head-on__2m__random__seed1"
+    summary_file = out / "runs" / run_id / "summary.json"
+    summary_file.write_text(
+        json.dumps(json.loads(summary_file.read_text()) | {"source_digest": "0123456789ab"})
+    )
+    result = hazardhunt("campaign", campaign_file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert "1 complete runs were made by other hazardhunt code" in result.stdout
+    assert run_id in result.stdout
+    again = hazardhunt("campaign", campaign_file, "--out", reference)
+    assert "other hazardhunt code" not in again.stdout
+
+
+def test_scenario_files_are_found_next_to_the_campaign_file(tmp_path: Path) -> None:
+    builtin = Path(load_scenario("head-on").source)
+    mine = tmp_path / "files" / "mine.toml"
+    mine.parent.mkdir()
+    mine.write_text(
+        builtin.read_text().replace(
+            'map = "shopfloor.toml"', f'map = "{builtin.parent / "shopfloor.toml"}"'
+        )
+    )
+    file = mine.parent / "grid.toml"
+    file.write_text(GRID.replace('"head-on", "overtaking"', '"mine.toml"'))
+    config = load_campaign(file)
+    assert config.scenarios == [str(mine)]
+    assert config.runs()[0].run_id == "mine__2m__random__seed0"

@@ -53,6 +53,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
+import hazardhunt
 from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
 from hazardhunt.campaign.run import RunProgress, execute_run, is_complete
 from hazardhunt.campaign.runner import partial_directory
@@ -143,6 +144,7 @@ def run_campaign(
         for leftover in runs_directory.glob(".*.partial"):
             shutil.rmtree(leftover)
         ledger = _Ledger(config, runs, out)
+        _warn_of_other_versions(ledger, console)
         pending = [run for run in runs if ledger.status(run) != "complete"]
         if pending:
             _execute(pending, runs_directory, ledger, workers, executor, address, console)
@@ -152,6 +154,22 @@ def run_campaign(
     if summary["runs_failed"]:
         raise CampaignFailed(summary)
     return summary
+
+
+def _warn_of_other_versions(ledger: _Ledger, console: Console | None) -> None:
+    """Say so when complete runs were made by other code than the runs still to come."""
+    current = hazardhunt.source_digest()
+    others = sorted(
+        entry["run_id"]
+        for entry in ledger.entries.values()
+        if entry["status"] == "complete" and entry.get("source_digest", current) != current
+    )
+    if others and console is not None:
+        console.print(
+            f"[yellow]warning:[/yellow] {len(others)} complete runs were made by other hazardhunt "
+            f"code (source digest differs from {current}): {escape(', '.join(others))}. "
+            "Delete their directories under runs/ to redo them with this code."
+        )
 
 
 def _check_run_ids(runs: list[RunConfig]) -> None:

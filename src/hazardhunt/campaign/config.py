@@ -162,7 +162,7 @@ class CampaignConfig(_Strict):
 
 
 def load_campaign(path: Path) -> CampaignConfig:
-    """Read and validate a campaign file.
+    """Read and validate a campaign file; relative scenario file paths are relative to it.
 
     Raises:
         ConfigError: Naming the file, the field and what is wrong.
@@ -173,6 +173,15 @@ def load_campaign(path: Path) -> CampaignConfig:
         raise ConfigError(f"{path}: no such campaign file") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path}: not valid TOML: {error}") from error
+    scenarios = data.get("scenarios")
+    if isinstance(scenarios, list):
+        # A scenario file named in a campaign file is found next to the campaign file.
+        data["scenarios"] = [
+            str(path.parent / name)
+            if isinstance(name, str) and name.endswith(".toml") and not Path(name).is_absolute()
+            else name
+            for name in scenarios
+        ]
     try:
         return CampaignConfig.model_validate(data)
     except ValidationError as error:
