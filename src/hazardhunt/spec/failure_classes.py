@@ -1,0 +1,191 @@
+"""Failure classes (SPEC 6): which mechanism led to an unsafe contact.
+
+A failure's class is read from the episode's trajectory (sampled every 0.2 s, see
+``AGVEnv.trajectory``) and its summary, at and before the contact. The features are the robot
+face that was touched, the safety layer's history, and whether the human was moving at contact
+(faster than ``moving_speed``, from the last two samples).
+
+With a protective field (10 classes; the study counted 9, with both sides of fewer mechanisms):
+
+- ``side-left/no-stop``, ``side-right/no-stop``: the field never triggered; the human walked
+  into the uncovered side.
+- ``side-left/restarted``, ``side-right/restarted``: a stop happened, was released, the robot
+  drove again and then touched the human on its side.
+- ``side-left/braking``, ``side-right/braking``: the stop holds at contact (the robot had not
+  yet come to a standstill) and the touch is on a side: the human left the field sideways.
+- ``field/braking/moving``, ``field/braking/standing``: the stop holds at contact on the front
+  face, the human entered the field over its arc (from ahead).
+- ``edge-entry/moving``, ``edge-entry/standing``: the stop holds at contact and the human last
+  entered the field over its straight edge, i.e. from beside the robot (its forward coordinate
+  in the robot's frame at most half the robot's length + ``edge_tolerance``).
+
+Without a field (8 classes):
+
+- ``front|left|right|rear`` ``/moving|standing``: the face touched and the human's motion.
+
+Anything else is ``other`` and kept, never dropped: a contact without a face, a front or rear
+touch the field never saw (the field covers the whole front face, so only a contact within the
+very physics step of entry can do that), a rear touch while braking, or a contact after a
+released stop without the robot driving again.
+
+Reachability with the built-in NMPC (``tests/spec/test_failure_classes.py``): scripted humans
+reach ``side-*/no-stop`` and ``*/moving`` side classes as failures. The braking and edge-entry
+mechanisms do occur, but the emergency stop (7.5 m/s^2) brings the robot from cruise to a
+standstill within about 0.13 s, so the scripted attempts ended as safe contacts (robot standing);
+the NMPC also stops ahead of a human who leaves its field, so no scripted human has yet made it
+restart into one (``*/restarted``). These classes are kept for other controllers and fields.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.geometry import to_body_frame
+
+OTHER = "other"
+"""The class of a failure that fits no other class."""
+
+SIDES = ("left", "right")
+FACES = ("front", "left", "right", "rear")
+MOTIONS = ("moving", "standing")
+
+Row = Mapping[str, Any]
+
+
+@runtime_checkable
+class FailureClassifier(Protocol):
+    """Names the mechanism of a failure episode; the plug-in point for other taxonomies."""
+
+    @property
+    def name(self) -> str:
+        """Short name of the taxonomy, recorded with the classes."""
+        ...
+
+    def classes_for(self, field_diameter: float | None) -> tuple[str, ...]:
+        """Every class ``classify`` can return for this field diameter (m, None: no field),
+        ``other`` last."""
+        ...
+
+    def classify(
+        self, trajectory: Sequence[Row], summary: Mapping[str, Any], field_diameter: float | None
+    ) -> str:
+        """The class of one episode, from its trajectory rows and its summary."""
+        ...
+
+
+@dataclass(frozen=True)
+class MechanismClassifier:
+    """The default taxonomy (SPEC 6): contact face x safety-layer history x human motion."""
+
+    name: str = "mechanism"
+    robot: RobotParams = RobotParams()
+    """The robot's dimensions, for the straight-edge test."""
+    moving_speed: float = 0.1
+    """Above this speed at contact the human counts as moving, in m/s."""
+    standstill_speed: float = 0.05
+    """Above this speed the robot counts as driving (SPEC 4's standstill), in m/s."""
+    edge_tolerance: float = 0.05
+    """Allowance beyond the front face for an entry over the straight edge, in m."""
+
+    def classes_for(self, field_diameter: float | None) -> tuple[str, ...]:
+        if field_diameter is None:
+            return (*(f"{face}/{motion}" for face in FACES for motion in MOTIONS), OTHER)
+        return (
+            *(f"side-{side}/no-stop" for side in SIDES),
+            *(f"side-{side}/restarted" for side in SIDES),
+            *(f"side-{side}/braking" for side in SIDES),
+            *(f"field/braking/{motion}" for motion in MOTIONS),
+            *(f"edge-entry/{motion}" for motion in MOTIONS),
+            OTHER,
+        )
+
+    def classify(
+        self, trajectory: Sequence[Row], summary: Mapping[str, Any], field_diameter: float | None
+    ) -> str:
+        face = summary.get("contact_face")
+        if face not in FACES or not trajectory:
+            return OTHER
+        motion = "moving" if human_speed_at_end(trajectory) > self.moving_speed else "standing"
+        if field_diameter is None:
+            return f"{face}/{motion}"
+        if not any(row["emergency_stop"] for row in trajectory):
+            return f"side-{face}/no-stop" if face in SIDES else OTHER
+        if trajectory[-1]["emergency_stop"]:
+            if self._entered_over_edge(trajectory):
+                return f"edge-entry/{motion}"
+            if face == "front":
+                return f"field/braking/{motion}"
+            return f"side-{face}/braking" if face in SIDES else OTHER
+        if face in SIDES and self._drove_after_release(trajectory):
+            return f"side-{face}/restarted"
+        return OTHER
+
+    def _entered_over_edge(self, trajectory: Sequence[Row]) -> bool:
+        """Whether the human's last entry into the field came from beside the robot."""
+        entry = last_field_entry(trajectory)
+        if entry is None:
+            return False
+        row = trajectory[entry]
+        forward, _ = to_body_frame(
+            np.array([row["human_x"], row["human_y"]]),
+            row["robot_x"],
+            row["robot_y"],
+            row["robot_heading"],
+        )
+        return forward <= self.robot.length / 2 + self.edge_tolerance
+
+    def _drove_after_release(self, trajectory: Sequence[Row]) -> bool:
+        """Whether the robot drove again after the last emergency stop was released."""
+        last_stop = max(i for i, row in enumerate(trajectory) if row["emergency_stop"])
+        return any(
+            row["robot_speed"] > self.standstill_speed for row in trajectory[last_stop + 1 :]
+        )
+
+
+def human_speed_at_end(trajectory: Sequence[Row]) -> float:
+    """The human's speed between the last two samples with distinct times, in m/s (0 for one)."""
+    last = trajectory[-1]
+    for previous in reversed(trajectory[:-1]):
+        elapsed = last["time"] - previous["time"]
+        if elapsed > 0:
+            distance = math.hypot(
+                last["human_x"] - previous["human_x"], last["human_y"] - previous["human_y"]
+            )
+            return float(distance / elapsed)
+    return 0.0
+
+
+def last_field_entry(trajectory: Sequence[Row]) -> int | None:
+    """Index of the last sample where ``human_in_field`` turned true (None: never in it)."""
+    entry = None
+    was_in_field = False
+    for index, row in enumerate(trajectory):
+        in_field = bool(row["human_in_field"])
+        if in_field and not was_in_field:
+            entry = index
+        was_in_field = in_field
+    return entry
+
+
+def classify_failures(
+    trajectories: Mapping[int, Sequence[Row]],
+    summaries: Mapping[int, Mapping[str, Any]],
+    field_diameter: float | None,
+    classifier: FailureClassifier | None = None,
+) -> dict[int, str]:
+    """The class of every episode of ``trajectories`` (by episode id), ``other`` included.
+
+    Raises:
+        KeyError: For an episode without a summary.
+    """
+    chosen: FailureClassifier = classifier if classifier is not None else MechanismClassifier()
+    return {
+        episode: chosen.classify(trajectory, summaries[episode], field_diameter)
+        for episode, trajectory in trajectories.items()
+    }
