@@ -154,11 +154,11 @@ def campaign(
     ] = None,
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign."""
-    from hazardhunt.campaign.campaign import run_campaign
+    from hazardhunt.campaign.campaign import EXECUTORS, run_campaign
     from hazardhunt.campaign.config import load_campaign
 
-    if executor not in ("local", "ray"):
-        raise typer.BadParameter("use local or ray", param_hint="--executor")
+    if executor not in EXECUTORS:
+        raise typer.BadParameter(f"use {' or '.join(EXECUTORS)}", param_hint="--executor")
     if workers < 1:
         raise typer.BadParameter("must be at least 1", param_hint="--workers")
     if address is not None and executor != "ray":

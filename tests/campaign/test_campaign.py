@@ -184,6 +184,9 @@ def test_ray_records_the_same_episodes_as_local(
         pytest.param(GRID.replace('"head-on"', '"roundabout"'), "scenarios", id="scenario"),
         pytest.param(GRID.replace('"random"', '"greedy"'), "testers", id="tester"),
         pytest.param(GRID.replace('"2m"', '"3m"'), "fields", id="field"),
+        pytest.param(
+            GRID + "[tester.greedy]\nn_steps = 8\n", "tester.greedy: unknown", id="tester-table"
+        ),
         pytest.param(GRID.replace(f"= {EPISODES}", "= 0"), "episodes", id="no-episodes"),
         pytest.param(GRID.replace("[0, 1]", "[]"), "seeds", id="no-seeds"),
         pytest.param(None, "no such campaign file", id="missing-file"),

@@ -7,7 +7,7 @@ import pytest
 
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sut.pursuit import PursuitController
-from hazardhunt.testers.random_sampling import RandomTester, human_path, path_is_clear
+from hazardhunt.testers.random_sampling import RandomTester, human_path
 
 
 @pytest.fixture(scope="module")
@@ -17,9 +17,7 @@ def env():
 
 
 def path_of(env, pose, action):
-    human = env.human_params
-    speed = 0.5 * (float(action[0]) + 1.0) * human.max_speed
-    turn_rate = float(action[1]) * human.max_turn_rate
+    speed, turn_rate = env.decode_action(action)
     return human_path(pose, speed, turn_rate, env.decision_period, env.physics_step)
 
 
@@ -27,32 +25,30 @@ def test_a_human_facing_a_nearby_shelf_never_walks_into_it(env):
     floor, radius = env.scenario.floor, env.human_params.radius
     # Facing east, 0.5 m from shelf block SE-2 (x >= 11.5): walking on for 2 s would hit it.
     pose = (11.5 - 0.5 - radius, 7.0, 0.0)
-    assert not path_is_clear(floor, path_of(env, pose, [1.0, 0.0]), radius)
+    assert not floor.discs_clear(path_of(env, pose, [1.0, 0.0]), radius)
     tester = RandomTester(seed=0)
-    actions = np.array([tester.choose(floor, pose, env) for _ in range(100)])
+    actions = np.array([tester.choose(env, pose) for _ in range(100)])
     for action in actions:
-        assert path_is_clear(floor, path_of(env, pose, action), radius)
+        assert floor.discs_clear(path_of(env, pose, action), radius)
     # Turning away or walking slowly is clear: the human keeps moving, not standing still.
     assert np.mean(actions[:, 0] == -1.0) < 0.05
 
 
 def test_a_cornered_human_turns_on_the_spot_instead_of_freezing(env):
-    floor = env.scenario.floor
     # Pressed into the south-west corner aisle, facing the wall: no walk is clear, so every
     # draw fails and the fallback turns in place at varying rates.
     pose = (0.46, 0.46, math.radians(225))
     tester = RandomTester(seed=0, attempts=1)
-    actions = np.array([tester.choose(floor, pose, env) for _ in range(50)])
+    actions = np.array([tester.choose(env, pose) for _ in range(50)])
     fallbacks = actions[actions[:, 0] == -1.0]
     assert len(fallbacks) > 0
     assert np.std(fallbacks[:, 1]) > 0.2
 
 
 def test_in_open_space_actions_cover_the_whole_action_space(env):
-    floor = env.scenario.floor
     pose = (10.0, 10.0, math.pi / 2)  # the middle of the crossing, facing north
     tester = RandomTester(seed=0)
-    actions = np.array([tester.choose(floor, pose, env) for _ in range(400)])
+    actions = np.array([tester.choose(env, pose) for _ in range(400)])
     assert np.all(actions.min(axis=0) < -0.95)
     assert np.all(actions.max(axis=0) > 0.95)
     assert np.abs(actions.mean(axis=0)).max() < 0.15

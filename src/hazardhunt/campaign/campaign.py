@@ -56,7 +56,7 @@ from rich.table import Table
 import hazardhunt
 from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
 from hazardhunt.campaign.run import RunProgress, execute_run, is_complete
-from hazardhunt.campaign.runner import partial_directory
+from hazardhunt.campaign.runner import execute_into_place, partial_directory
 from hazardhunt.campaign.store import write_json_atomic
 
 EXECUTORS = ("local", "ray")
@@ -459,13 +459,7 @@ def _initialize_worker(campaign_pid: int, progress_queue: Queue[tuple[str, int]]
 
 def _run_in_worker(run: RunConfig, runs_directory: Path) -> dict[str, Any]:
     """Execute ``run`` into its partial directory and rename it into place once complete."""
-    final = runs_directory / run.run_id
-    partial = partial_directory(final)
-    if partial.exists():
-        shutil.rmtree(partial)
-    summary = execute_run(run, partial, _progress_reporter(run.run_id))
-    partial.rename(final)
-    return summary
+    return execute_into_place(run, runs_directory / run.run_id, _progress_reporter(run.run_id))
 
 
 def _progress_reporter(run_id: str) -> Callable[[RunProgress], None]:

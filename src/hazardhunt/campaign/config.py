@@ -5,20 +5,18 @@ from __future__ import annotations
 import re
 import sys
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.testers import TESTER_NAMES
 from hazardhunt.world.scenario import format_validation_error
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
-
-TESTER_NAMES = ("random", "ppo-acc", "ppo-max")
-"""The built-in testers."""
 
 
 class ConfigError(ValueError):
@@ -71,14 +69,22 @@ def _check_tester(value: str) -> str:
     return value
 
 
+ScenarioName = Annotated[str, AfterValidator(_check_scenario)]
+"""A built-in scenario name or a scenario file that loads."""
+FieldSetting = Annotated[str, AfterValidator(_check_field)]
+"""A protective-field setting: none, 1.25m or 2m."""
+TesterName = Annotated[str, AfterValidator(_check_tester)]
+"""A built-in tester."""
+
+
 class RunConfig(_Strict):
     """One tester x one scenario x one field setting x one seed x a budget of episodes."""
 
-    scenario: str
+    scenario: ScenarioName
     """A built-in scenario name or a scenario file."""
-    field: str
+    field: FieldSetting
     """Protective-field setting: none, 1.25m or 2m."""
-    tester: str
+    tester: TesterName
     """The search method: random, ppo-acc or ppo-max."""
     seed: int = Field(ge=0)
     """Seeds every random choice of the run."""
@@ -87,10 +93,6 @@ class RunConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester_params: dict[str, Any] = {}
     """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
-
-    _scenario_ok = field_validator("scenario")(_check_scenario)
-    _field_ok = field_validator("field")(_check_field)
-    _tester_ok = field_validator("tester")(_check_tester)
 
     @property
     def run_id(self) -> str:
@@ -102,29 +104,14 @@ class RunConfig(_Strict):
 class CampaignConfig(_Strict):
     """A grid of runs: every scenario x field x tester x seed, each with ``episodes``."""
 
-    scenarios: list[str] = Field(min_length=1)
-    fields: list[str] = Field(min_length=1)
-    testers: list[str] = Field(min_length=1)
+    scenarios: list[ScenarioName] = Field(min_length=1)
+    fields: list[FieldSetting] = Field(min_length=1)
+    testers: list[TesterName] = Field(min_length=1)
     seeds: list[int] = Field(min_length=1)
     episodes: int = Field(gt=0)
     env: EnvOptions = EnvOptions()
-    tester: dict[str, dict[str, Any]] = {}
+    tester: dict[TesterName, dict[str, Any]] = {}
     """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
-
-    @field_validator("scenarios")
-    @classmethod
-    def _scenarios_ok(cls, values: list[str]) -> list[str]:
-        return [_check_scenario(v) for v in values]
-
-    @field_validator("fields")
-    @classmethod
-    def _fields_ok(cls, values: list[str]) -> list[str]:
-        return [_check_field(v) for v in values]
-
-    @field_validator("testers")
-    @classmethod
-    def _testers_ok(cls, values: list[str]) -> list[str]:
-        return [_check_tester(v) for v in values]
 
     @field_validator("seeds")
     @classmethod
@@ -134,13 +121,6 @@ class CampaignConfig(_Strict):
         if len(set(values)) != len(values):
             raise ValueError("seeds must be distinct")
         return values
-
-    @field_validator("tester")
-    @classmethod
-    def _tester_tables_ok(cls, tables: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
-        for name in tables:
-            _check_tester(name)
-        return tables
 
     def runs(self) -> list[RunConfig]:
         """The runs of the grid, in a stable order."""

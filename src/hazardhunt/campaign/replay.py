@@ -13,6 +13,7 @@ import pandas as pd
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import make_env
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.spec.rewards import REWARD_KINDS, RewardKind
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""
@@ -43,7 +44,9 @@ class ReplayResult:
         )
 
 
-def load_failure(run_directory: Path, failure_id: int) -> tuple[RunConfig, str, dict[str, Any]]:
+def load_failure(
+    run_directory: Path, failure_id: int
+) -> tuple[RunConfig, RewardKind, dict[str, Any]]:
     """The run's configuration, its reward and the failure's row."""
     config_path = run_directory / "config.json"
     if not config_path.is_file():
@@ -60,7 +63,10 @@ def load_failure(run_directory: Path, failure_id: int) -> tuple[RunConfig, str, 
             f"{run_directory}: no failure {failure_id} (the run recorded "
             f"{len(failures)}{': ' + known if known else ''}{' ...' if len(failures) > 10 else ''})"
         )
-    return RunConfig.model_validate(stored["run"]), stored["reward"], match.iloc[0].to_dict()
+    reward = stored["reward"]
+    if reward not in REWARD_KINDS:
+        raise ReplayError(f"{config_path}: reward: {reward!r} is not one of {list(REWARD_KINDS)}")
+    return RunConfig.model_validate(stored["run"]), reward, match.iloc[0].to_dict()
 
 
 def replay_failure(run_directory: Path, failure_id: int) -> ReplayResult:

@@ -15,6 +15,7 @@ from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.outcomes import TerminationParams
+from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder
 
@@ -32,13 +33,13 @@ class RunProgress:
 ProgressCallback = Callable[[RunProgress], None]
 
 
-def make_env(config: RunConfig, reward: str) -> AGVEnv:
+def make_env(config: RunConfig, reward: RewardKind) -> AGVEnv:
     """The environment a run's configuration describes."""
     options = config.env
     return AGVEnv(
         config.scenario,
         config.field,
-        reward=reward,  # type: ignore[arg-type]
+        reward=reward,
         decision_period=options.decision_period,
         solver=options.solver,
         termination=TerminationParams(options.episode_duration, options.stall_duration),

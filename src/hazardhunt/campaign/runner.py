@@ -18,7 +18,7 @@ from rich.progress import (
 )
 
 from hazardhunt.campaign.config import ConfigError, RunConfig
-from hazardhunt.campaign.run import RunProgress, execute_run, is_complete
+from hazardhunt.campaign.run import ProgressCallback, RunProgress, execute_run, is_complete
 
 
 def partial_directory(out: Path) -> Path:
@@ -45,19 +45,26 @@ def run_into(config: RunConfig, out: Path, console: Console | None = None) -> di
                 console.print(f"{out}: already complete")
             return summary
         raise ConfigError(f"{out}: exists and is not a finished run; choose another --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if console is None:
+        return execute_into_place(config, out)
+    return _with_progress(config, out, console)
+
+
+def execute_into_place(
+    config: RunConfig, out: Path, progress: ProgressCallback | None = None
+) -> dict[str, Any]:
+    """Execute ``config`` into the hidden partial sibling of ``out`` (discarding any leftover
+    there) and rename it to ``out`` once complete; the run's summary."""
     partial = partial_directory(out)
     if partial.exists():
         shutil.rmtree(partial)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if console is None:
-        summary = execute_run(config, partial)
-    else:
-        summary = _with_progress(config, partial, console)
+    summary = execute_run(config, partial, progress)
     partial.rename(out)
     return summary
 
 
-def _with_progress(config: RunConfig, directory: Path, console: Console) -> dict[str, Any]:
+def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, Any]:
     columns = (
         TextColumn(f"{config.run_id}"),
         BarColumn(),
@@ -73,4 +80,4 @@ def _with_progress(config: RunConfig, directory: Path, console: Console) -> dict
             rate = state.episodes_done / state.elapsed_s if state.elapsed_s > 0 else 0.0
             progress.update(task, completed=state.episodes_done, rate=rate, failures=state.failures)
 
-        return execute_run(config, directory, update)
+        return execute_into_place(config, out, update)

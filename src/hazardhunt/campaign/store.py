@@ -42,6 +42,9 @@ EPISODE_COLUMNS = (
 )
 """Columns of ``episodes.parquet`` besides ``episode`` and ``controller_errors``."""
 
+FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_face", "max_risk")
+"""Columns of ``failures.parquet`` taken from the episode summary (besides the replay keys)."""
+
 TRAJECTORY_FLUSH = 200
 """Failures whose trajectories are buffered before a part file is written."""
 
@@ -97,11 +100,7 @@ class RunStore:
                 "failure_id": record.index,
                 "episode": record.index,
                 **self.replay_keys,
-                "outcome": summary["outcome"],
-                "sim_time": summary["sim_time"],
-                "decision_steps": summary["decision_steps"],
-                "contact_face": summary["contact_face"],
-                "max_risk": summary["max_risk"],
+                **{key: summary[key] for key in FAILURE_SUMMARY_COLUMNS},
                 "actions": record.actions.tolist(),
             }
         )
@@ -127,11 +126,7 @@ class RunStore:
             "failure_id",
             "episode",
             *self.replay_keys,
-            "outcome",
-            "sim_time",
-            "decision_steps",
-            "contact_face",
-            "max_risk",
+            *FAILURE_SUMMARY_COLUMNS,
             "actions",
         ]
         failures = pd.DataFrame(self.failures, columns=failure_columns)

@@ -240,10 +240,8 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             raise RuntimeError("call reset() before step()")
         if self._outcome is not None:
             raise RuntimeError(f"the episode has ended ({self._outcome.value}); call reset()")
-        clipped = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
         self._episode["actions"].append(np.asarray(action, dtype=np.float32).copy())
-        speed = 0.5 * (clipped[0] + 1.0) * self.human_params.max_speed
-        turn_rate = clipped[1] * self.human_params.max_turn_rate
+        speed, turn_rate = self.decode_action(action)
 
         self._step_report = self._fresh_step_report()
         risks = []
@@ -263,6 +261,12 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         if outcome is not None:
             self._record_row()
         return self._observation(), reward, terminated, truncated, self._info()
+
+    def decode_action(self, action: ActType) -> tuple[float, float]:
+        """The human's (speed in m/s, turn rate in rad/s) for a normalised action (clipped)."""
+        clipped = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
+        speed = 0.5 * (float(clipped[0]) + 1.0) * self.human_params.max_speed
+        return speed, float(clipped[1]) * self.human_params.max_turn_rate
 
     # ------------------------------------------------------------------ physics
     def _physics(self, speed: float, turn_rate: float) -> tuple[float, Outcome | None]:

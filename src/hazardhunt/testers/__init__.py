@@ -6,6 +6,9 @@ from typing import Any
 
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester
 
+TESTER_NAMES = ("random", "ppo-acc", "ppo-max")
+"""The built-in testers."""
+
 
 def make_tester(name: str, seed: int, params: dict[str, Any] | None = None) -> Tester:
     """Build a tester by name (``random``, ``ppo-acc``, ``ppo-max``) with keyword ``params``."""
@@ -18,7 +21,7 @@ def make_tester(name: str, seed: int, params: dict[str, Any] | None = None) -> T
         from hazardhunt.testers.ppo import PPOTester
 
         return PPOTester(name, "acc" if name == "ppo-acc" else "max", seed, params)
-    raise ValueError(f"unknown tester {name!r}: use one of random, ppo-acc, ppo-max")
+    raise ValueError(f"unknown tester {name!r}: use one of {', '.join(TESTER_NAMES)}")
 
 
-__all__ = ["EpisodeRecord", "EpisodeRecorder", "Tester", "make_tester"]
+__all__ = ["TESTER_NAMES", "EpisodeRecord", "EpisodeRecorder", "Tester", "make_tester"]

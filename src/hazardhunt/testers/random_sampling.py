@@ -9,15 +9,13 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers.base import EpisodeRecorder
-from hazardhunt.world.floor import FloorMap
-from hazardhunt.world.geometry import distances_to_segments
 
 
 class RandomTester:
@@ -29,7 +27,7 @@ class RandomTester:
     def __init__(self, seed: int, attempts: int = 20) -> None:
         """Args:
         seed: Seeds the sampling.
-        attempts: Draws per decision before falling back to standing still.
+        attempts: Draws per decision before falling back to turning on the spot.
         """
         self.seed = seed
         self.attempts = attempts
@@ -39,22 +37,19 @@ class RandomTester:
         agv = env.agv
         env.reset(seed=self.seed)
         while env.episodes_done < episodes:
-            action = self.choose(agv.scenario.floor, agv.human_pose, agv)
+            action = self.choose(agv, agv.human_pose)
             _, _, terminated, truncated, _ = env.step(action)
             if (terminated or truncated) and env.episodes_done < episodes:
                 env.reset()
 
-    def choose(
-        self, floor: FloorMap, pose: tuple[float, float, float], agv: Any
-    ) -> NDArray[np.float32]:
-        """One obstacle-free action for a human at ``pose``."""
-        human = agv.human_params
+    def choose(self, agv: AGVEnv, pose: tuple[float, float, float]) -> NDArray[np.float32]:
+        """One obstacle-free action in ``agv`` for a human at ``pose`` (x, y in m, heading in
+        rad)."""
         for _ in range(self.attempts):
             action = self.rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
-            speed = 0.5 * (float(action[0]) + 1.0) * human.max_speed
-            turn_rate = float(action[1]) * human.max_turn_rate
+            speed, turn_rate = agv.decode_action(action)
             path = human_path(pose, speed, turn_rate, agv.decision_period, agv.physics_step)
-            if path_is_clear(floor, path, human.radius):
+            if agv.scenario.floor.discs_clear(path, agv.human_params.radius):
                 return action
         # Turning on the spot is always clear, and lets a human facing a wall turn away.
         return np.array([-1.0, self.rng.uniform(-1.0, 1.0)], dtype=np.float32)
@@ -84,14 +79,3 @@ def human_path(
         ],
         axis=1,
     )
-
-
-def path_is_clear(floor: FloorMap, path: NDArray[np.float64], radius: float) -> bool:
-    """Whether a disc following ``path`` stays on the floor and off every obstacle."""
-    if not (
-        np.all(path >= radius)
-        and np.all(path[:, 0] <= floor.width - radius)
-        and np.all(path[:, 1] <= floor.height - radius)
-    ):
-        return False
-    return bool(np.all(distances_to_segments(path, floor.edges) >= radius))

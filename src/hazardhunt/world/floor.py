@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 
 from hazardhunt.world.geometry import (
     FloatArray,
+    distances_to_segments,
     nearest_points_on_segments,
     point_in_polygon,
     polygon_edges,
@@ -67,10 +68,17 @@ class FloorMap:
 
     def boundary_distance(self, point: FloatArray) -> float:
         """Distance from a point to the nearest obstacle edge, in m (inf without obstacles)."""
-        if len(self.edges) == 0:
-            return float("inf")
-        nearest = nearest_points_on_segments(point, self.edges)
-        return float(np.min(np.hypot(*(nearest - point).T)))
+        return float(distances_to_segments(point[None, :], self.edges)[0])
+
+    def discs_clear(self, centers: FloatArray, radius: float) -> bool:
+        """Whether discs at all of ``centers`` (P, 2) stay on the floor and off every obstacle
+        edge (the check for a path sampled finer than the disc's radius)."""
+        on_floor = (
+            np.all(centers >= radius)
+            and np.all(centers[:, 0] <= self.width - radius)
+            and np.all(centers[:, 1] <= self.height - radius)
+        )
+        return bool(on_floor and np.all(distances_to_segments(centers, self.edges) >= radius))
 
     def obstacle_clearance(self, point: FloatArray) -> float:
         """Distance from a point to the nearest obstacle boundary, negative inside one, in m."""

@@ -202,7 +202,8 @@ def _parse(path: Path, model: type[_Strict]) -> Any:
 def format_validation_error(error: ValidationError) -> str:
     """The first problem of a pydantic error as ``field: message`` (and how many more)."""
     first = error.errors()[0]
-    field = ".".join(str(part) for part in first["loc"]) or "(top level)"
+    # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
+    field = ".".join(str(part) for part in first["loc"] if part != "[key]") or "(top level)"
     message = str(first["msg"]).removeprefix("Value error, ")
     more = error.error_count() - 1
     return f"{field}: {message}" + (f" (and {more} more problems)" if more else "")
