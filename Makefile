@@ -4,8 +4,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 OUT ?= demo-output
+WORKERS ?= 2
 
-.PHONY: install demo test test-slow test-all lint format type bench clean
+.PHONY: install browser demo test test-slow test-all lint format type bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,16 +16,35 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-demo: $(STAMP)
-	$(BIN)/hazardhunt demo --out $(OUT)
+APT_INSTALL := DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends
 
-test: $(STAMP)
+# Headless Chromium for tests/analysis/test_report_browser.py (Debian's package).
+browser:
+	@if command -v chromium >/dev/null 2>&1; then \
+		exit 0; \
+	elif [ "$$(id -u)" = 0 ]; then \
+		apt-get update && $(APT_INSTALL) chromium; \
+	elif command -v sudo >/dev/null 2>&1; then \
+		sudo apt-get update && sudo $(APT_INSTALL) chromium; \
+	else \
+		echo "make browser: chromium is missing and this user can't install it." >&2; \
+		echo "Install Debian's 'chromium' package as root:" >&2; \
+		echo "  apt-get update && apt-get install -y --no-install-recommends chromium" >&2; \
+		exit 1; \
+	fi
+
+# The quick campaign (campaigns/quick.toml) and its report; run it again to finish it.
+demo: $(STAMP)
+	$(BIN)/hazardhunt campaign campaigns/quick.toml --out $(OUT) --workers $(WORKERS)
+	$(BIN)/hazardhunt report $(OUT)
+
+test: $(STAMP) browser
 	$(BIN)/pytest -q
 
 test-slow: $(STAMP)
 	$(BIN)/pytest -q -m slow
 
-test-all: $(STAMP)
+test-all: $(STAMP) browser
 	$(BIN)/pytest -q -m 'slow or not slow'
 
 lint: $(STAMP)

@@ -34,8 +34,8 @@ def main() -> None:
 
 
 @app.command()
-def demo(
-    out: Annotated[Path, typer.Option(help="Directory for the pictures.")] = Path("demo-output"),
+def scenarios(
+    out: Annotated[Path, typer.Option(help="Directory for the pictures.")] = Path("scenarios"),
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")] = "1.25m",
     seed: Annotated[int, typer.Option(help="Seed of the random human.")] = 0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
@@ -167,6 +167,21 @@ def campaign(
     run_campaign(config, out, workers=workers, executor=executor, address=address, console=console)
 
 
+@app.command()
+def report(
+    directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
+) -> None:
+    """Write the study's figures and tables for a run or campaign into DIRECTORY/report."""
+    from hazardhunt.analysis.report import write_report
+
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task("report", total=None)
+        index = write_report(
+            directory, lambda step: progress.update(task, description=f"report: {step}")
+        )
+    console.print(f"report written to [bold]{index.resolve()}[/bold]")
+
+
 def _validated(build: Callable[[], T]) -> T:
     from pydantic import ValidationError
 
@@ -194,11 +209,12 @@ def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
 
 def run() -> None:
     """Entry point that turns input errors into one clear line on stderr and exit code 2."""
+    from hazardhunt.analysis.results import ResultsError
     from hazardhunt.campaign.replay import ReplayError
 
     try:
         app()
-    except (ScenarioError, ConfigError, ReplayError) as error:
+    except (ScenarioError, ConfigError, ReplayError, ResultsError) as error:
         err_console.print(f"[red]error:[/red] {escape(str(error))}")
         raise SystemExit(2) from None
 

@@ -44,14 +44,23 @@ class ReplayResult:
         )
 
 
-def load_failure(
-    run_directory: Path, failure_id: int
-) -> tuple[RunConfig, RewardKind, dict[str, Any]]:
-    """The run's configuration, its reward and the failure's row."""
+def load_run_config(run_directory: Path) -> tuple[RunConfig, RewardKind]:
+    """A run's configuration and its tester's reward, from ``config.json``."""
     config_path = run_directory / "config.json"
     if not config_path.is_file():
         raise ReplayError(f"{run_directory}: not a run directory (no config.json)")
     stored = json.loads(config_path.read_text())
+    reward = stored["reward"]
+    if reward not in REWARD_KINDS:
+        raise ReplayError(f"{config_path}: reward: {reward!r} is not one of {list(REWARD_KINDS)}")
+    return RunConfig.model_validate(stored["run"]), reward
+
+
+def load_failure(
+    run_directory: Path, failure_id: int
+) -> tuple[RunConfig, RewardKind, dict[str, Any]]:
+    """The run's configuration, its reward and the failure's row."""
+    config, reward = load_run_config(run_directory)
     failures_path = run_directory / "failures.parquet"
     if not failures_path.is_file():
         raise ReplayError(f"{run_directory}: the run has not finished (no failures.parquet)")
@@ -63,22 +72,31 @@ def load_failure(
             f"{run_directory}: no failure {failure_id} (the run recorded "
             f"{len(failures)}{': ' + known if known else ''}{' ...' if len(failures) > 10 else ''})"
         )
-    reward = stored["reward"]
-    if reward not in REWARD_KINDS:
-        raise ReplayError(f"{config_path}: reward: {reward!r} is not one of {list(REWARD_KINDS)}")
-    return RunConfig.model_validate(stored["run"]), reward, match.iloc[0].to_dict()
+    return config, reward, match.iloc[0].to_dict()
+
+
+def replay_actions(
+    config: RunConfig, reward: RewardKind, actions: Any
+) -> tuple[AGVEnv, dict[str, Any]]:
+    """Play one episode of a run's environment with recorded actions.
+
+    Returns:
+        The env after the episode (its trajectory is the episode's) and the last step's info.
+    """
+    env = make_env(config, reward)
+    env.reset(seed=config.seed)
+    info: dict[str, Any] = {"outcome": None, "sim_time": 0.0}
+    for action in actions:
+        _, _, terminated, truncated, info = env.step(np.asarray(list(action), dtype=np.float32))
+        if terminated or truncated:
+            break
+    return env, info
 
 
 def replay_failure(run_directory: Path, failure_id: int) -> ReplayResult:
     """Replay one failure of a run with its recorded actions."""
     config, reward, row = load_failure(run_directory, failure_id)
-    env = make_env(config, reward)
-    env.reset(seed=config.seed)
-    info: dict[str, Any] = {"outcome": None, "sim_time": 0.0}
-    for action in row["actions"]:
-        _, _, terminated, truncated, info = env.step(np.asarray(list(action), dtype=np.float32))
-        if terminated or truncated:
-            break
+    env, info = replay_actions(config, reward, row["actions"])
     return ReplayResult(
         failure_id=failure_id,
         recorded_outcome=str(row["outcome"]),

@@ -14,6 +14,7 @@ import hazardhunt
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
 from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
@@ -58,6 +59,7 @@ def execute_run(
     started_at = datetime.now(timezone.utc).isoformat()
     tester = make_tester(config.tester, config.seed, config.tester_params)
     env = make_env(config, tester.reward)
+    classifier = MechanismClassifier(robot=env.robot_params)
     write_json_atomic(
         directory / "config.json",
         {
@@ -80,6 +82,8 @@ def execute_run(
             "seed": config.seed,
             "decision_period": config.env.decision_period,
         },
+        classifier,
+        env.field_diameter,
     )
     clock = time.perf_counter()
 
@@ -117,6 +121,10 @@ def execute_run(
         "goals": outcomes.count("goal"),
         "sut_errors": outcomes.count("sut_error"),
         "first_failure_episode": first_failure,
+        "classifier": classifier.name,
+        "classes": store.classes_found,
+        "classes_found": len(set(store.classes_found) - {OTHER}),
+        "classes_total": len(classifier.classes_for(env.field_diameter)) - 1,
         "wall_time_s": wall_time,
         "episodes_per_s": len(outcomes) / wall_time if wall_time > 0 else 0.0,
         "started_at": started_at,

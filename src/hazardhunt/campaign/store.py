@@ -5,6 +5,8 @@ Layout of a run directory::
     config.json          the resolved configuration, package version, seeds
     episodes.parquet     one row per episode (SPEC 7)
     failures.parquet     one row per failure: what replays it (scenario, field, seed, actions)
+                         and its class (SPEC 6)
+    loitering.parquet    one row per episode flagged as loitering (reward hacking), with its actions
     trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by failure_id
     tester/              what the tester learned (the PPO model)
     summary.json         written last: its presence marks the run complete
@@ -21,6 +23,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from hazardhunt.spec.failure_classes import FailureClassifier
+from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.testers.base import EpisodeRecord
 
 EPISODE_COLUMNS = (
@@ -40,10 +44,13 @@ EPISODE_COLUMNS = (
     "solve_time_max_s",
     "contact_face",
 )
-"""Columns of ``episodes.parquet`` besides ``episode`` and ``controller_errors``."""
+"""Columns of ``episodes.parquet`` besides ``episode``, ``controller_errors`` and ``loitering``."""
 
 FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_face", "max_risk")
 """Columns of ``failures.parquet`` taken from the episode summary (besides the replay keys)."""
+
+LOITERING_COLUMNS = ("outcome", "sim_time", "decision_steps", "estop_count", "time_in_field")
+"""Columns of ``loitering.parquet`` taken from the episode summary (besides the replay keys)."""
 
 TRAJECTORY_FLUSH = 200
 """Failures whose trajectories are buffered before a part file is written."""
@@ -59,6 +66,7 @@ def write_bytes_atomic(path: Path, payload: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
+        os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes it private; keep the umask's
         with os.fdopen(handle, "wb") as stream:
             stream.write(payload)
             stream.flush()
@@ -69,17 +77,37 @@ def write_bytes_atomic(path: Path, payload: bytes) -> None:
         raise
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 class RunStore:
     """Collects a run's episodes and failures and writes them as Parquet."""
 
-    def __init__(self, directory: Path, replay_keys: dict[str, Any]) -> None:
+    def __init__(
+        self,
+        directory: Path,
+        replay_keys: dict[str, Any],
+        classifier: FailureClassifier,
+        field_diameter: float | None,
+        loitering: LoiteringRule = LoiteringRule(),
+    ) -> None:
         """Args:
         directory: The run directory (exists).
         replay_keys: Columns every failure row carries to replay it (scenario, field, seed,
             decision period).
+        classifier: Names each failure's class.
+        field_diameter: The protective field's diameter for the classifier, in m (None: none).
+        loitering: Flags episodes whose actions are kept to show reward hacking.
         """
         self.directory = directory
         self.replay_keys = replay_keys
+        self.classifier = classifier
+        self.field_diameter = field_diameter
+        self.loitering_rule = loitering
+        self.loitering: list[dict[str, Any]] = []
         self.episodes: list[dict[str, Any]] = []
         self.failures: list[dict[str, Any]] = []
         self._trajectory_rows: list[dict[str, Any]] = []
@@ -92,15 +120,29 @@ class RunStore:
         summary = record.summary
         row = {"episode": record.index} | {k: summary[k] for k in EPISODE_COLUMNS}
         row["controller_errors"] = "; ".join(summary["controller_errors"])
+        row["loitering"] = self.loitering_rule.matches(summary)
         self.episodes.append(row)
+        if row["loitering"]:
+            self.loitering.append(
+                {
+                    "episode": record.index,
+                    **self.replay_keys,
+                    **{key: summary[key] for key in LOITERING_COLUMNS},
+                    "actions": record.actions.tolist(),
+                }
+            )
         if summary["outcome"] != "failure":
             return
+        contact = record.trajectory[-1]
         self.failures.append(
             {
                 "failure_id": record.index,
                 "episode": record.index,
                 **self.replay_keys,
                 **{key: summary[key] for key in FAILURE_SUMMARY_COLUMNS},
+                "class": self.classifier.classify(record.trajectory, summary, self.field_diameter),
+                "contact_x": contact["human_x"],
+                "contact_y": contact["human_y"],
                 "actions": record.actions.tolist(),
             }
         )
@@ -115,11 +157,18 @@ class RunStore:
         """Failures stored so far."""
         return len(self.failures)
 
+    @property
+    def classes_found(self) -> list[str]:
+        """The distinct failure classes stored so far, in the classifier's order."""
+        found = {row["class"] for row in self.failures}
+        return [name for name in self.classifier.classes_for(self.field_diameter) if name in found]
+
     def close(self) -> None:
         """Write the tables."""
         self._flush_trajectories()
         episodes = pd.DataFrame(
-            self.episodes, columns=["episode", *EPISODE_COLUMNS, "controller_errors"]
+            self.episodes,
+            columns=["episode", *EPISODE_COLUMNS, "controller_errors", "loitering"],
         )
         episodes.to_parquet(self.directory / "episodes.parquet", index=False)
         failure_columns = [
@@ -127,10 +176,18 @@ class RunStore:
             "episode",
             *self.replay_keys,
             *FAILURE_SUMMARY_COLUMNS,
+            "class",
+            "contact_x",
+            "contact_y",
             "actions",
         ]
         failures = pd.DataFrame(self.failures, columns=failure_columns)
         failures.to_parquet(self.directory / "failures.parquet", index=False)
+        loitering = pd.DataFrame(
+            self.loitering,
+            columns=["episode", *self.replay_keys, *LOITERING_COLUMNS, "actions"],
+        )
+        loitering.to_parquet(self.directory / "loitering.parquet", index=False)
 
     def _flush_trajectories(self) -> None:
         if not self._trajectory_rows:

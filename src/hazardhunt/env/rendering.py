@@ -171,6 +171,8 @@ def animate_episode(
     title: str = "",
     frame_step: int = 1,
     fps: int = 10,
+    last_seconds: float | None = None,
+    size: float = 6.0,
 ) -> Path:
     """Write an animated GIF of the env's recorded trajectory (one frame per 0.2 s sample).
 
@@ -180,38 +182,83 @@ def animate_episode(
         title: Shown above every frame, followed by the time.
         frame_step: Use every ``frame_step``-th sample.
         fps: Frames per second of the animation (10 plays twice as fast as real time).
+        last_seconds: Animate only the episode's last seconds (None: all of it); the tracks
+            are drawn from the start.
+        size: Width and height of the picture, in inches at 80 dpi.
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    rows = env.trajectory()[::frame_step]
-    if not rows:
+    every = env.trajectory()
+    if not every:
         raise ValueError("the env has no recorded trajectory: play an episode first")
-    figure = Figure(figsize=(6, 6), dpi=80)
+    since = -np.inf if last_seconds is None else every[-1]["time"] - last_seconds
+    first = next(i for i, row in enumerate(every) if row["time"] >= since)
+    frames = list(range(first, len(every)))[::-1][::frame_step][::-1]
+    figure = Figure(figsize=(size, size), dpi=80)
     FigureCanvasAgg(figure)
     ax = figure.add_subplot()
 
     def draw(index: int) -> list[Any]:
         ax.clear()
-        draw_floor(ax, env.scenario, env.route)
-        upto = rows[: index + 1]
-        ax.plot([r["robot_x"] for r in upto], [r["robot_y"] for r in upto], color="#1f77b4")
-        ax.plot([r["human_x"] for r in upto], [r["human_y"] for r in upto], color="#ff7f0e")
-        row = rows[index]
-        draw_robot(
-            ax,
-            (row["robot_x"], row["robot_y"], row["robot_heading"]),
-            env.robot_params,
-            env.field_diameter,
-            row["emergency_stop"],
-        )
-        if row["predicted_human"] is not None:
-            ax.plot(*np.asarray(row["predicted_human"]).reshape(-1, 2).T, ":", color="#ff7f0e")
-        draw_human(ax, (row["human_x"], row["human_y"]), row["human_heading"], env.human_params)
-        stop = ", EMERGENCY STOP" if row["emergency_stop"] else ""
-        ax.set_title(f"{title}  t = {row['time']:.1f} s{stop}")
+        draw_state(ax, env, every[: frames[index] + 1], title)
         return []
 
-    animation = FuncAnimation(figure, draw, frames=len(rows), blit=False)
+    animation = FuncAnimation(figure, draw, frames=len(frames), blit=False)
     path.parent.mkdir(parents=True, exist_ok=True)
     animation.save(str(path), writer=PillowWriter(fps=fps))
+    return path
+
+
+def draw_state(ax: Axes, env: AGVEnv, rows: Sequence[dict[str, Any]], title: str = "") -> None:
+    """The floor, both tracks up to the last of ``rows`` and the poses at that sample."""
+    draw_floor(ax, env.scenario, env.route)
+    ax.plot([r["robot_x"] for r in rows], [r["robot_y"] for r in rows], color="#1f77b4")
+    ax.plot([r["human_x"] for r in rows], [r["human_y"] for r in rows], color="#ff7f0e")
+    row = rows[-1]
+    draw_robot(
+        ax,
+        (row["robot_x"], row["robot_y"], row["robot_heading"]),
+        env.robot_params,
+        env.field_diameter,
+        row["emergency_stop"],
+    )
+    if row["predicted_human"] is not None:
+        ax.plot(*np.asarray(row["predicted_human"]).reshape(-1, 2).T, ":", color="#ff7f0e")
+    draw_human(ax, (row["human_x"], row["human_y"]), row["human_heading"], env.human_params)
+    stop = ", EMERGENCY STOP" if row["emergency_stop"] else ""
+    ax.set_title(f"{title}  t = {row['time']:.1f} s{stop}".strip(), fontsize=9)
+
+
+def plot_frames(
+    path: Path,
+    env: AGVEnv,
+    times: Sequence[float],
+    captions: Sequence[str] | None = None,
+    zoom: float | None = 4.0,
+) -> Path:
+    """Write a PNG of the played episode at a few instants side by side (a frame sequence).
+
+    Args:
+        path: The PNG to write.
+        env: An env whose episode has been played.
+        times: The instants, in s; each frame shows the last sample at or before it.
+        captions: One caption per frame (default: the time).
+        zoom: Half the width of the window around the robot, in m (None: the whole floor).
+    """
+    rows = env.trajectory()
+    if not rows:
+        raise ValueError("the env has no recorded trajectory: play an episode first")
+    figure = Figure(figsize=(3.2 * len(times), 3.4), dpi=90)
+    for column, moment in enumerate(times):
+        upto = [row for row in rows if row["time"] <= moment + 1e-9] or rows[:1]
+        ax = figure.add_subplot(1, len(times), column + 1)
+        caption = captions[column] if captions is not None else ""
+        draw_state(ax, env, upto, caption)
+        if zoom is not None:
+            centre = upto[-1]
+            ax.set_xlim(centre["robot_x"] - zoom, centre["robot_x"] + zoom)
+            ax.set_ylim(centre["robot_y"] - zoom, centre["robot_y"] + zoom)
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path)
     return path

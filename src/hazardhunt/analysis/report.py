@@ -1,0 +1,405 @@
+"""``hazardhunt report DIR``: the study's figures and tables from a run or campaign directory.
+
+Writes ``DIR/report/``::
+
+    index.html       self-contained (images inlined): opens offline, can be mailed
+    summary.json     per run and per table, machine-readable
+    tables/          every table as CSV and Markdown
+    figures/         every figure as PNG, the representative failures also as GIF
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+import hazardhunt
+from hazardhunt.analysis import figures, tables
+from hazardhunt.analysis.results import Results, load_results
+from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
+from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
+from hazardhunt.env.agv import AGVEnv
+from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
+from hazardhunt.spec.reward_hacking import LoiteringRule
+
+RUN_COLUMNS = (
+    "run_id",
+    "scenario",
+    "field",
+    "tester",
+    "seed",
+    "episodes",
+    "failures",
+    "classes_found",
+    "classes_total",
+    "wall_time_s",
+    "episodes_per_s",
+)
+"""What ``summary.json`` says about every run (SPEC 8)."""
+
+Progress = Callable[[str], None]
+"""Told the name of each step of the report as it starts."""
+
+
+@dataclass
+class _Section:
+    title: str
+    intro: str = ""
+    parts: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _Report:
+    """What has been written so far, to assemble the HTML page from."""
+
+    directory: Path
+    sections: list[_Section] = field(default_factory=list)
+    tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+
+    @property
+    def figures(self) -> Path:
+        return self.directory / "figures"
+
+    def section(self, title: str, intro: str = "") -> _Section:
+        section = _Section(title, intro)
+        self.sections.append(section)
+        return section
+
+    def table(self, section: _Section, name: str, table: pd.DataFrame, caption: str = "") -> None:
+        """Write ``tables/<name>.csv`` and ``.md`` and show the table in ``section``."""
+        self.tables[name] = table
+        folder = self.directory / "tables"
+        folder.mkdir(parents=True, exist_ok=True)
+        table.to_csv(folder / f"{name}.csv", index=False)
+        (folder / f"{name}.md").write_text(markdown_table(table) + "\n")
+        shown = html.escape(caption) if caption else ""
+        section.parts.append(
+            f'<figure class="table" id="table-{name}">{_html_table(table)}'
+            f'<figcaption>{shown} <a href="tables/{name}.csv">CSV</a></figcaption></figure>'
+        )
+
+    def image(self, section: _Section, path: Path, caption: str) -> None:
+        """Inline an image written under ``figures/`` into ``section``."""
+        mime = "image/gif" if path.suffix == ".gif" else "image/png"
+        data = base64.b64encode(path.read_bytes()).decode()
+        section.parts.append(
+            f'<figure><img src="data:{mime};base64,{data}" alt="{html.escape(caption)}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        )
+
+
+def write_report(directory: Path, progress: Progress | None = None) -> Path:
+    """Write the report of a run or campaign directory; returns the path of ``index.html``.
+
+    Raises:
+        ResultsError: When the directory holds no finished run.
+    """
+    tell = progress if progress is not None else (lambda step: None)
+    tell("reading results")
+    results = load_results(directory)
+    report = _Report(directory / "report")
+    report.directory.mkdir(exist_ok=True)
+    tell("failures per run")
+    _failures_per_run(report, results)
+    tell("failure classes and lessons")
+    _table_sections(report, results)
+    tell("reward hacking")
+    _reward_hacking(report, results)
+    tell("learning curves and heat maps")
+    _learning_and_places(report, results)
+    tell("representative failures")
+    _representatives(report, results)
+    tell("failure rates")
+    _rates(report, results)
+    _runs(report, results)
+    tell("writing index.html")
+    summary = _summary(results, report)
+    write_json_atomic(report.directory / "summary.json", summary)
+    index = report.directory / "index.html"
+    write_bytes_atomic(index, _page(results, report).encode())
+    return index
+
+
+# ------------------------------------------------------------------ sections
+def _failures_per_run(report: _Report, results: Results) -> None:
+    section = report.section(
+        "Failures per run",
+        "Mean number of failures (unsafe contacts) per run by scenario and tester, for each "
+        "protective-field setting; error bars are the standard deviation over seeds, dots the "
+        "seeds (the study's bar chart).",
+    )
+    path = figures.failures_bar_chart(results.runs, report.figures / "failures_per_run.png")
+    report.image(section, path, "Failures per run by scenario, tester and field setting")
+    report.table(section, "failures_per_run", tables.failures_per_run(results.runs))
+
+
+TABLE_SECTIONS: tuple[tuple[str, str, str, Callable[[Results], pd.DataFrame]], ...] = (
+    (
+        "Failure classes found (Table I)",
+        "Distinct failure classes found over all seeds, k / K, beside the study's own numbers. "
+        "K counts the named classes of the taxonomy (docs/failure-classes.md): 10 with a field "
+        "and 8 without, where the study counted 9 and 8; failures no class fits are listed as "
+        "'other' and not counted in k.",
+        "classes",
+        tables.class_coverage,
+    ),
+    (
+        "Lesson 1: does RL find more failures than random sampling?",
+        "For every (scenario, field, seed) that both testers ran, whether the RL tester found "
+        "more failures than random sampling with the same seed.",
+        "lesson_1",
+        lambda results: tables.lesson_1(results.runs),
+    ),
+    (
+        "Runtime: accumulated vs maximum reward (Table II)",
+        "Mean wall time per run; the speedup of ppo-max is 1 - max / acc as in the study. "
+        "'per 20k' scales the measured time per episode to the study's 20,000 episodes.",
+        "runtime",
+        lambda results: tables.runtime_table(results.runs),
+    ),
+)
+"""Sections that are one table each: title, explanation, table name, how to compute it."""
+
+
+def _table_sections(report: _Report, results: Results) -> None:
+    for title, intro, name, compute in TABLE_SECTIONS:
+        report.table(report.section(title, intro), name, compute(results))
+
+
+def _reward_hacking(report: _Report, results: Results) -> None:
+    rule = LoiteringRule().describe()
+    section = report.section(
+        "Lesson 3: reward hacking, measured",
+        "Per tester: the human's time inside the protective field and the emergency stops per "
+        "episode, the share of stalls and timeouts, the return of episodes without a failure, "
+        f"and the episodes flagged as loitering ({rule}). Returns compare within a reward "
+        "only: ppo-acc sums the risk over the episode, ppo-max and random take its maximum.",
+    )
+    report.table(section, "reward_hacking", tables.reward_hacking(results.episodes))
+    typical = tables.typical_loitering(results.loitering)
+    if typical is None:
+        section.parts.append("<p>No episode matched the loitering pattern.</p>")
+        return
+    config, reward = load_run_config(results.run_directory(str(typical["run_id"])))
+    env, _ = replay_actions(config, reward, typical["actions"])
+    times, captions = loitering_frames(env)
+    path = plot_frames(report.figures / "loitering.png", env, times, captions)
+    report.image(
+        section,
+        path,
+        f"The most typical loitering episode: {typical['run_id']}, episode "
+        f"{int(typical['episode'])} ({typical['outcome']}, {int(typical['estop_count'])} stops, "
+        f"{typical['time_in_field']:.1f} s in the field)",
+    )
+
+
+def loitering_frames(env: AGVEnv) -> tuple[list[float], list[str]]:
+    """Four instants that tell a loitering episode: approach, stop, release, next stop (or,
+    without a release, the stop held until the end)."""
+    rows = env.trajectory()
+    stops = [row["emergency_stop"] for row in rows]
+    times = [row["time"] for row in rows]
+    first = stops.index(True) if True in stops else 0
+    release = next((i for i in range(first, len(rows)) if not stops[i]), None)
+    again = (
+        next((i for i in range(release, len(rows)) if stops[i]), None)
+        if release is not None
+        else None
+    )
+    approach = max(0.0, times[first] - 1.0)
+    if release is not None and again is not None:
+        return (
+            [approach, times[first], times[release], times[again]],
+            ["walks in front", "field triggers a stop", "leaves, robot restarts", "another stop"],
+        )
+    middle = times[first] + (times[-1] - times[first]) / 2
+    return (
+        [approach, times[first], middle, times[-1]],
+        ["walks in front", "field triggers a stop", "stays in the field", "end"],
+    )
+
+
+def _learning_and_places(report: _Report, results: Results) -> None:
+    section = report.section(
+        "Learning curves",
+        "Failures per 100 episodes over the course of the runs (mean over scenarios and seeds).",
+    )
+    curves = tables.learning_curves(results.episodes)
+    path = figures.learning_curves_figure(curves, report.figures / "learning_curves.png")
+    report.image(section, path, "Failures per 100 episodes over the runs")
+    places = report.section(
+        "Where failures happen", "The human's position at each failure's contact, per tester."
+    )
+    failures = results.failures
+    if failures.empty or "contact_x" not in failures:
+        places.parts.append("<p>No failure was recorded.</p>")
+        return
+    for scenario in sorted(results.runs["scenario"].unique()):
+        chosen = failures[failures["scenario"] == scenario]
+        name = _file_name(f"heat_map_{scenario}")
+        path = figures.failure_heat_map(chosen, scenario, report.figures / f"{name}.png")
+        report.image(places, path, f"Failures on the floor: {scenario}")
+
+
+def _representatives(report: _Report, results: Results) -> None:
+    section = report.section(
+        "A representative failure per class",
+        "For every class found, the failure whose time to contact is the class's median, "
+        "re-simulated from its record: its tracks and an animation of its last seconds.",
+    )
+    chosen = tables.representatives(results.failures)
+    if chosen.empty:
+        section.parts.append("<p>No failure was recorded.</p>")
+        return
+    rows = []
+    for _, row in chosen.iterrows():
+        run_id, failure_id, name = str(row["run_id"]), int(row["failure_id"]), str(row["class"])
+        replay = replay_failure(results.run_directory(run_id), failure_id)
+        stem = _file_name(f"class_{name}")
+        title = f"{name}: {run_id}, failure {failure_id}"
+        picture = plot_episode(
+            report.figures / f"{stem}.png",
+            replay.env.scenario,
+            replay.env.route,
+            replay.env.trajectory(),
+            replay.env.field_diameter,
+            title,
+            replay.replayed_outcome,
+        )
+        animation = animate_episode(
+            report.figures / f"{stem}.gif",
+            replay.env,
+            title=name,
+            fps=5,
+            last_seconds=6.0,
+            size=4.5,
+        )
+        report.image(section, picture, title)
+        report.image(section, animation, f"{name}: the last 6 s")
+        rows.append(
+            {
+                "class": name,
+                "run_id": run_id,
+                "failure_id": failure_id,
+                "sim_time": row["sim_time"],
+                "contact_face": row["contact_face"],
+                "replayed": "reproduced" if replay.matches else "NOT reproduced",
+            }
+        )
+    report.table(
+        section, "representatives", pd.DataFrame(rows), "hazardhunt replay RUN --failure ID"
+    )
+
+
+def _rates(report: _Report, results: Results) -> None:
+    section = report.section(
+        "Failure rates",
+        "Failures per episode by scenario, field and tester (seeds pooled) with the exact 95 % "
+        "Clopper-Pearson interval.",
+    )
+    rates = tables.failure_rates(results.runs)
+    path = figures.failure_rates_figure(rates, report.figures / "failure_rates.png")
+    report.image(section, path, "Failure rate with its 95 % confidence interval")
+    report.table(section, "failure_rates", rates)
+
+
+def _runs(report: _Report, results: Results) -> None:
+    section = report.section("Runs", "Every finished run.")
+    report.table(section, "runs", results.runs[[c for c in RUN_COLUMNS if c in results.runs]])
+    if results.unfinished:
+        section.parts.append(
+            f'<p class="warning">{len(results.unfinished)} runs of the campaign have not '
+            f"finished and are left out: {html.escape(', '.join(results.unfinished))}.</p>"
+        )
+
+
+# ------------------------------------------------------------------ outputs
+def _summary(results: Results, report: _Report) -> dict[str, Any]:
+    def records(table: pd.DataFrame) -> list[dict[str, Any]]:
+        return list(json.loads(table.to_json(orient="records")))
+
+    lesson = report.tables["lesson_1"]
+    return {
+        "directory": str(results.directory),
+        "generated_at": datetime.now(timezone.utc).isoformat(),
+        "hazardhunt_version": hazardhunt.__version__,
+        "runs": records(results.runs[[c for c in RUN_COLUMNS if c in results.runs]]),
+        "unfinished_runs": results.unfinished,
+        "lesson_1": {
+            str(row["tester"]): {
+                "more_failures_than_random": int(row["more failures than random"]),
+                "comparisons": int(row["comparisons"]),
+            }
+            for _, row in lesson.iterrows()
+        },
+        "tables": {name: records(table) for name, table in report.tables.items()},
+    }
+
+
+_STYLE = """
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
+h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
+th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
+th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
+figure { margin: 1em 0; } img { max-width: 100%; }
+figcaption { font-size: 0.85em; color: #555; }
+.warning { color: #b00; }
+"""
+
+
+def _page(results: Results, report: _Report) -> str:
+    runs = results.runs
+    contents = "".join(
+        f'<li><a href="#s{i}">{html.escape(s.title)}</a></li>'
+        for i, s in enumerate(report.sections)
+    )
+    body = "".join(
+        f'<section id="s{i}"><h2>{html.escape(s.title)}</h2>'
+        f"<p>{html.escape(s.intro)}</p>{''.join(s.parts)}</section>"
+        for i, s in enumerate(report.sections)
+    )
+    facts = (
+        f"{len(runs)} runs, {int(runs['episodes'].sum())} episodes, "
+        f"{int(runs['failures'].sum())} failures; "
+        f"hazardhunt {hazardhunt.__version__}, "
+        f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
+    )
+    return (
+        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+        f"<title>hazardhunt report: {html.escape(results.directory.name)}</title>"
+        f"<style>{_STYLE}</style></head><body>"
+        f"<h1>hazardhunt report: {html.escape(str(results.directory))}</h1>"
+        f"<p>{html.escape(facts)}</p><ol>{contents}</ol>{body}</body></html>"
+    )
+
+
+def _html_table(table: pd.DataFrame) -> str:
+    return str(table.to_html(index=False, float_format=_number, border=0, na_rep=""))
+
+
+def markdown_table(table: pd.DataFrame) -> str:
+    """A table in GitHub Markdown, numbers to four significant digits."""
+    header = "| " + " | ".join(str(c) for c in table.columns) + " |"
+    rule = "|" + "|".join("---" for _ in table.columns) + "|"
+    lines = [header, rule]
+    for row in table.itertuples(index=False):
+        cells = [_number(v) if isinstance(v, float) else str(v) for v in row]
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def _number(value: float) -> str:
+    return "" if pd.isna(value) else f"{value:.4g}"
+
+
+def _file_name(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)

@@ -1,0 +1,121 @@
+"""A run or campaign directory's results as pandas tables, one row per run, episode or failure."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from hazardhunt.campaign.config import CampaignConfig
+from hazardhunt.campaign.run import is_complete
+from hazardhunt.spec.failure_classes import FailureClassifier, MechanismClassifier
+from hazardhunt.sut.safety_layer import field_diameter
+
+RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
+"""Columns that name a run in every table."""
+
+
+class ResultsError(ValueError):
+    """The directory holds no results that can be read."""
+
+
+@dataclass(frozen=True)
+class Results:
+    """Everything the finished runs of a run or campaign directory recorded."""
+
+    directory: Path
+    runs: pd.DataFrame
+    """One row per finished run: its summary and its ``directory``."""
+    episodes: pd.DataFrame
+    """One row per episode (``episodes.parquet``), with the run's keys."""
+    failures: pd.DataFrame
+    """One row per failure (``failures.parquet``), with the run's keys."""
+    loitering: pd.DataFrame
+    """One row per episode flagged as loitering (``loitering.parquet``), with the run's keys."""
+    unfinished: list[str] = field(default_factory=list)
+    """Run ids of the campaign that have not finished (they are left out of every table)."""
+    classifier: FailureClassifier = MechanismClassifier()
+
+    def classes_for(self, field_setting: str) -> tuple[str, ...]:
+        """The classes a failure can have under a field setting, ``other`` last."""
+        return self.classifier.classes_for(field_diameter(field_setting))
+
+    def run_directory(self, run_id: str) -> Path:
+        """Where a run's files are."""
+        return Path(self.runs.set_index("run_id").at[run_id, "directory"])
+
+
+def load_results(directory: Path) -> Results:
+    """Read a run directory or a campaign directory (its finished runs).
+
+    Raises:
+        ResultsError: When ``directory`` is neither, or nothing in it has finished.
+    """
+    if not directory.is_dir():
+        raise ResultsError(f"{directory}: no such directory")
+    if (directory / "campaign.json").is_file():
+        run_directories, unfinished = _campaign_runs(directory)
+    elif (directory / "config.json").is_file():
+        if not is_complete(directory):
+            raise ResultsError(f"{directory}: the run has not finished (no summary.json)")
+        run_directories, unfinished = [directory], []
+    else:
+        raise ResultsError(
+            f"{directory}: not a run or campaign directory (no config.json or campaign.json)"
+        )
+    if not run_directories:
+        raise ResultsError(f"{directory}: no run of the campaign has finished yet")
+    summaries = [_read_json(path / "summary.json") for path in run_directories]
+    runs = pd.DataFrame(summaries)
+    runs["directory"] = [str(path) for path in run_directories]
+    runs = runs.sort_values(list(RUN_KEYS[1:])).reset_index(drop=True)
+    tables = {
+        name: _stacked(run_directories, summaries, f"{name}.parquet")
+        for name in ("episodes", "failures", "loitering")
+    }
+    return Results(directory, runs, unfinished=unfinished, **tables)
+
+
+def _campaign_runs(directory: Path) -> tuple[list[Path], list[str]]:
+    config = CampaignConfig.model_validate(_read_json(directory / "campaign.json"))
+    finished, unfinished = [], []
+    for run in config.runs():
+        path = directory / "runs" / run.run_id
+        if is_complete(path):
+            finished.append(path)
+        else:
+            unfinished.append(run.run_id)
+    return finished, unfinished
+
+
+def _stacked(
+    run_directories: list[Path], summaries: list[dict[str, Any]], name: str
+) -> pd.DataFrame:
+    """One table of every run, with the run's keys as the first columns."""
+    parts = []
+    for path, summary in zip(run_directories, summaries, strict=True):
+        table_path = path / name
+        if not table_path.is_file():
+            continue  # a run recorded before the table existed
+        table = pd.read_parquet(table_path)
+        for position, key in enumerate(RUN_KEYS):
+            if key in table.columns:
+                table = table.drop(columns=key)
+            table.insert(position, key, summary[key])
+        parts.append(table)
+    if not parts:
+        return pd.DataFrame(columns=list(RUN_KEYS))
+    return pd.concat(parts, ignore_index=True)
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ResultsError(f"{path}: cannot be read ({error})") from error
+    if not isinstance(data, dict):
+        raise ResultsError(f"{path}: expected a JSON object")
+    return data

@@ -1,0 +1,223 @@
+"""The study's tables and hazardhunt's own, computed from a campaign's results (SPEC 8).
+
+Each function takes the tables of ``Results`` and returns a plain DataFrame, one row per line of
+the printed table, so that the report can write it as CSV, Markdown and HTML alike.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.stats import beta
+
+from hazardhunt.analysis.results import Results
+from hazardhunt.analysis.study import (
+    STUDY_CLASSES,
+    STUDY_EPISODES,
+    STUDY_LESSON_1,
+    STUDY_RUNTIME_MINUTES,
+)
+from hazardhunt.spec.failure_classes import OTHER
+
+BASELINE = "random"
+"""The tester the others are compared with (Lesson 1)."""
+
+
+def failures_per_run(runs: pd.DataFrame) -> pd.DataFrame:
+    """Failures per run by field, scenario and tester: mean and spread over the seeds."""
+    grouped = runs.groupby(["field", "scenario", "tester"], sort=True)["failures"]
+    table = grouped.agg(["mean", "std", "min", "max", "count"]).reset_index()
+    table["std"] = table["std"].fillna(0.0)
+    return table.rename(columns={"count": "seeds"})
+
+
+def class_coverage(results: Results) -> pd.DataFrame:
+    """Table I: the distinct classes found over all seeds, ``k / K``, beside the study's.
+
+    ``other`` is listed but not counted in k; K is the number of named classes.
+    """
+    rows = []
+    for (scenario, field, tester), _ in results.runs.groupby(["scenario", "field", "tester"]):
+        named = results.classes_for(field)[:-1]
+        failures = results.failures
+        mask = (
+            (failures["scenario"] == scenario)
+            & (failures["field"] == field)
+            & (failures["tester"] == tester)
+        )
+        found = set(failures.loc[mask, "class"]) if "class" in failures else set()
+        study = STUDY_CLASSES.get((scenario, field), {}).get(tester)
+        rows.append(
+            {
+                "scenario": scenario,
+                "field": field,
+                "tester": tester,
+                "found": len(found - {OTHER}),
+                "total": len(named),
+                "k / K": f"{len(found - {OTHER})} / {len(named)}",
+                "study k / K": f"{study[0]} / {study[1]}" if study else "",
+                "classes": ", ".join(name for name in (*named, OTHER) if name in found),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
+    """Table II: mean wall time per run of ``ppo-acc`` and ``ppo-max`` and the speedup.
+
+    The speedup is the study's: 1 - max / acc. Beside the measured means are the same runs
+    scaled to the study's 20,000 episodes, and the study's own runtimes.
+    """
+    rows = []
+    rl = runs[runs["tester"].isin(["ppo-acc", "ppo-max"])]
+    for (scenario, field), group in rl.groupby(["scenario", "field"], sort=True):
+        means = group.groupby("tester")["wall_time_s"].mean()
+        per_episode = (group["wall_time_s"] / group["episodes"]).groupby(group["tester"]).mean()
+        if not {"ppo-acc", "ppo-max"} <= set(means.index):
+            continue
+        study = STUDY_RUNTIME_MINUTES.get((scenario, field))
+        row: dict[str, Any] = {
+            "scenario": scenario,
+            "field": field,
+            "ppo-acc (s)": means["ppo-acc"],
+            "ppo-max (s)": means["ppo-max"],
+            "speedup": 1.0 - means["ppo-max"] / means["ppo-acc"],
+            "ppo-acc per 20k (h:mm)": _hours_minutes(per_episode["ppo-acc"] * STUDY_EPISODES),
+            "ppo-max per 20k (h:mm)": _hours_minutes(per_episode["ppo-max"] * STUDY_EPISODES),
+        }
+        if study:
+            row |= {
+                "study ppo-acc (h:mm)": _hours_minutes(study["ppo-acc"] * 60.0),
+                "study ppo-max (h:mm)": _hours_minutes(study["ppo-max"] * 60.0),
+                "study speedup": 1.0 - study["ppo-max"] / study["ppo-acc"],
+                "faster than the study (ppo-max)": study["ppo-max"]
+                * 60.0
+                / (per_episode["ppo-max"] * STUDY_EPISODES),
+            }
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
+    """Lesson 1: in how many (scenario, field, seed) comparisons each tester found more
+    failures than random sampling, beside the study's counts."""
+    keys = ["scenario", "field", "seed"]
+    baseline = runs[runs["tester"] == BASELINE].set_index(keys)["failures"]
+    rows = []
+    for tester, group in runs[runs["tester"] != BASELINE].groupby("tester", sort=True):
+        paired = (
+            group.set_index(keys)["failures"]
+            .to_frame("tester")
+            .join(baseline.rename("baseline"), how="inner")
+        )
+        study = STUDY_LESSON_1.get(str(tester))
+        rows.append(
+            {
+                "tester": tester,
+                "more failures than random": int((paired["tester"] > paired["baseline"]).sum()),
+                "ties": int((paired["tester"] == paired["baseline"]).sum()),
+                "fewer": int((paired["tester"] < paired["baseline"]).sum()),
+                "comparisons": len(paired),
+                "study": f"{study[0]} of {study[1]}" if study else "",
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
+    """Lesson 3, measured per tester: the human's time in the field and the stops it caused per
+    episode, the share of stalls and timeouts, the return of episodes without a failure, and the
+    episodes flagged as loitering."""
+    rows = []
+    for tester, group in episodes.groupby("tester", sort=True):
+        no_failure = group[group["outcome"] != "failure"]
+        loitering = group["loitering"] if "loitering" in group else pd.Series(False, group.index)
+        rows.append(
+            {
+                "tester": tester,
+                "episodes": len(group),
+                "time in field per episode (s)": group["time_in_field"].mean(),
+                "emergency stops per episode": group["estop_count"].mean(),
+                "stall share": (group["outcome"] == "stall").mean(),
+                "timeout share": (group["outcome"] == "timeout").mean(),
+                "return without failure": no_failure["return"].mean(),
+                "loitering episodes": int(loitering.sum()),
+                "loitering share": float(loitering.mean()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def clopper_pearson(failures: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) confidence interval of a failure rate."""
+    if trials <= 0:
+        return 0.0, 1.0
+    alpha = 1.0 - confidence
+    low = 0.0 if failures == 0 else float(beta.ppf(alpha / 2, failures, trials - failures + 1))
+    high = (
+        1.0
+        if failures == trials
+        else float(beta.ppf(1 - alpha / 2, failures + 1, trials - failures))
+    )
+    return low, high
+
+
+def failure_rates(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+    """Failures per episode by scenario, field and tester (seeds pooled), with the exact
+    confidence interval."""
+    totals = runs.groupby(["scenario", "field", "tester"], sort=True)[["failures", "episodes"]]
+    table = totals.sum().reset_index()
+    bounds = [
+        clopper_pearson(int(k), int(n), confidence)
+        for k, n in zip(table["failures"], table["episodes"], strict=True)
+    ]
+    table["rate"] = table["failures"] / table["episodes"]
+    table["low"] = [low for low, _ in bounds]
+    table["high"] = [high for _, high in bounds]
+    return table
+
+
+def learning_curves(episodes: pd.DataFrame, bins: int = 20) -> pd.DataFrame:
+    """Failures per 100 episodes over the course of the runs, per tester and field (mean over
+    scenarios and seeds), in ``bins`` equal slices of the budget."""
+    if episodes.empty:
+        return pd.DataFrame(columns=["tester", "field", "episode", "failures per 100 episodes"])
+    budget = int(episodes["episode"].max()) + 1
+    width = max(1, int(np.ceil(budget / bins)))
+    frame = episodes.assign(
+        slice=episodes["episode"] // width, failed=episodes["outcome"] == "failure"
+    )
+    per_run = frame.groupby(["tester", "field", "run_id", "slice"])["failed"].mean()
+    curves = per_run.groupby(["tester", "field", "slice"]).mean().reset_index()
+    curves["episode"] = (curves["slice"] + 1) * width
+    curves["failures per 100 episodes"] = 100.0 * curves["failed"]
+    return curves[["tester", "field", "episode", "failures per 100 episodes"]]
+
+
+def representatives(failures: pd.DataFrame) -> pd.DataFrame:
+    """One failure per class: the one whose time to contact is the class's median (ties: the
+    first in run order)."""
+    if failures.empty or "class" not in failures:
+        return failures.iloc[0:0]
+    chosen = []
+    for _, group in failures.groupby("class", sort=True):
+        distance = (group["sim_time"] - group["sim_time"].median()).abs()
+        chosen.append(group.loc[distance.idxmin()])
+    return pd.DataFrame(chosen).reset_index(drop=True)
+
+
+def typical_loitering(loitering: pd.DataFrame) -> pd.Series | None:
+    """The loitering episode closest to the median time in field and number of stops."""
+    if loitering.empty:
+        return None
+    features = loitering[["time_in_field", "estop_count"]].astype(float)
+    spread = features.std().replace(0.0, 1.0).fillna(1.0)
+    distance = (((features - features.median()) / spread) ** 2).sum(axis=1)
+    return loitering.loc[distance.idxmin()]
+
+
+def _hours_minutes(seconds: float) -> str:
+    minutes = round(seconds / 60.0)
+    return f"{minutes // 60}:{minutes % 60:02d}"

@@ -1,0 +1,154 @@
+"""``hazardhunt report``: what a user finds in the report of a small campaign."""
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from PIL import Image
+
+from hazardhunt.analysis.results import ResultsError, load_results
+from hazardhunt.spec.failure_classes import MechanismClassifier
+from hazardhunt.sut.safety_layer import field_diameter
+from tests.helpers import hazardhunt
+
+TABLES = (
+    "failures_per_run",
+    "classes",
+    "lesson_1",
+    "runtime",
+    "reward_hacking",
+    "representatives",
+    "failure_rates",
+    "runs",
+)
+
+
+def run_summaries(campaign: Path) -> dict[str, dict]:
+    return {
+        path.parent.name: json.loads(path.read_text())
+        for path in (campaign / "runs").glob("*/summary.json")
+    }
+
+
+def test_every_failure_is_classified_with_a_class_of_its_field_setting(campaign):
+    for run in (campaign / "runs").iterdir():
+        failures = pd.read_parquet(run / "failures.parquet")
+        summary = json.loads((run / "summary.json").read_text())
+        allowed = MechanismClassifier().classes_for(field_diameter(summary["field"]))
+        assert failures["class"].isin(allowed).all()
+        assert summary["classes"] == [c for c in allowed if c in set(failures["class"])]
+
+
+def test_the_summary_has_every_run_with_its_own_numbers(campaign, report):
+    summary = json.loads((report / "summary.json").read_text())
+    recorded = run_summaries(campaign)
+    assert {run["run_id"] for run in summary["runs"]} == set(recorded)
+    for run in summary["runs"]:
+        own = recorded[run["run_id"]]
+        for key in ("scenario", "field", "tester", "seed", "episodes", "failures"):
+            assert run[key] == own[key]
+        assert run["classes_found"] == own["classes_found"] <= run["classes_total"]
+        assert run["wall_time_s"] == pytest.approx(own["wall_time_s"])
+        assert run["episodes_per_s"] > 0
+
+
+def test_lesson_1_counts_match_the_runs(campaign, report):
+    summary = json.loads((report / "summary.json").read_text())
+    by_key = {
+        (r["scenario"], r["field"], r["seed"], r["tester"]): r["failures"]
+        for r in run_summaries(campaign).values()
+    }
+    for tester in ("ppo-acc", "ppo-max"):
+        wins = sum(
+            failures > by_key[(scenario, field, seed, "random")]
+            for (scenario, field, seed, name), failures in by_key.items()
+            if name == tester
+        )
+        assert summary["lesson_1"][tester] == {"more_failures_than_random": wins, "comparisons": 2}
+
+
+def test_every_table_is_written_as_csv_and_markdown(report):
+    for name in TABLES:
+        table = pd.read_csv(report / "tables" / f"{name}.csv")
+        markdown = (report / "tables" / f"{name}.md").read_text().splitlines()
+        assert len(table) >= 1
+        assert len(markdown) == len(table) + 2  # header and rule
+
+
+def test_the_figures_are_pictures(report):
+    names = {path.name for path in (report / "figures").iterdir()}
+    for expected in (
+        "failures_per_run.png",
+        "learning_curves.png",
+        "failure_rates.png",
+        "heat_map_overtaking.png",
+        "loitering.png",
+    ):
+        assert expected in names
+    for path in (report / "figures").iterdir():
+        with Image.open(path) as image:
+            assert image.width > 100
+            assert image.height > 100
+
+
+def test_each_class_found_has_a_representative_that_replays(campaign, report):
+    found = set()
+    for run in (campaign / "runs").iterdir():
+        found |= set(pd.read_parquet(run / "failures.parquet")["class"])
+    representatives = pd.read_csv(report / "tables" / "representatives.csv")
+    assert set(representatives["class"]) == found
+    assert (representatives["replayed"] == "reproduced").all()
+    for name in found:
+        stem = "class_" + "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+        assert (report / "figures" / f"{stem}.png").is_file()
+        assert (report / "figures" / f"{stem}.gif").is_file()
+
+
+def test_the_page_is_self_contained(report):
+    page = (report / "index.html").read_text()
+    assert "http://" not in page
+    assert "https://" not in page
+    assert page.count("data:image/png;base64,") >= 5
+    for title in (
+        "Failures per run",
+        "Table I",
+        "Lesson 1",
+        "Table II",
+        "reward hacking",
+        "Learning curves",
+        "Where failures happen",
+        "representative failure",
+        "Failure rates",
+    ):
+        assert title in page
+
+
+def test_a_partly_finished_campaign_reports_its_finished_runs(campaign, tmp_path):
+    copy = tmp_path / "campaign"
+    shutil.copytree(campaign, copy, ignore=shutil.ignore_patterns("report"))
+    unfinished = sorted((copy / "runs").iterdir())[0]
+    (unfinished / "summary.json").unlink()
+    results = load_results(copy)
+    assert results.unfinished == [unfinished.name]
+    assert len(results.runs) == 5
+    assert unfinished.name not in set(results.episodes["run_id"])
+
+
+def test_a_directory_without_results_is_a_clear_error(tmp_path):
+    result = hazardhunt("report", tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        f"error: {tmp_path}: not a run or campaign directory (no config.json or campaign.json)"
+    )
+    with pytest.raises(ResultsError, match="no such directory"):
+        load_results(tmp_path / "missing")
+
+
+def test_the_report_is_readable_as_the_umask_allows(report):
+    mask = os.umask(0)
+    os.umask(mask)
+    for name in ("index.html", "summary.json"):
+        assert (report / name).stat().st_mode & 0o777 == 0o666 & ~mask

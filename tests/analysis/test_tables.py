@@ -1,0 +1,184 @@
+"""The report's tables on small hand-made results, checked against hand-computed values."""
+
+import math
+
+import pandas as pd
+import pytest
+
+from hazardhunt.analysis import tables
+from hazardhunt.analysis.results import Results
+from hazardhunt.spec.reward_hacking import LoiteringRule
+
+
+def runs(rows):
+    """A runs table from (scenario, field, tester, seed, failures[, wall time]) tuples."""
+    frame = pd.DataFrame(
+        [
+            {
+                "run_id": f"{s}__{f}__{t}__seed{seed}",
+                "scenario": s,
+                "field": f,
+                "tester": t,
+                "seed": seed,
+                "failures": k,
+                "episodes": 100,
+                "wall_time_s": rest[0] if rest else 10.0,
+            }
+            for s, f, t, seed, k, *rest in rows
+        ]
+    )
+    return frame
+
+
+def test_failures_per_run_is_the_mean_and_spread_over_seeds():
+    table = tables.failures_per_run(
+        runs([("crossing", "2m", "random", seed, k) for seed, k in enumerate([2, 4, 9])])
+    )
+    row = table.iloc[0]
+    assert (row["mean"], row["min"], row["max"], row["seeds"]) == (5.0, 2, 9, 3)
+    assert row["std"] == pytest.approx(math.sqrt(((2 - 5) ** 2 + 1 + 16) / 2))
+
+
+def test_lesson_1_counts_seed_by_seed_wins_ties_and_losses_against_random():
+    table = tables.lesson_1(
+        runs(
+            [
+                ("crossing", "2m", "random", 0, 3),
+                ("crossing", "2m", "random", 1, 5),
+                ("crossing", "2m", "random", 2, 1),
+                ("crossing", "2m", "ppo-max", 0, 4),  # more
+                ("crossing", "2m", "ppo-max", 1, 5),  # tie
+                ("crossing", "2m", "ppo-max", 2, 0),  # fewer
+                ("crossing", "2m", "ppo-max", 3, 9),  # no random run with seed 3: not compared
+            ]
+        )
+    ).set_index("tester")
+    row = table.loc["ppo-max"]
+    assert (row["more failures than random"], row["ties"], row["fewer"]) == (1, 1, 1)
+    assert row["comparisons"] == 3
+    assert row["study"] == "24 of 27"
+
+
+def test_class_coverage_counts_distinct_named_classes_over_seeds_not_other():
+    run_table = runs([("crossing", "1.25m", "random", 0, 3), ("crossing", "1.25m", "random", 1, 1)])
+    failures = pd.DataFrame(
+        {
+            "scenario": "crossing",
+            "field": "1.25m",
+            "tester": "random",
+            "seed": [0, 0, 0, 1],
+            "class": ["side-left/no-stop", "side-left/no-stop", "other", "side-right/no-stop"],
+        }
+    )
+    empty = pd.DataFrame()
+    results = Results(None, run_table, empty, failures, empty)  # type: ignore[arg-type]
+    row = tables.class_coverage(results).iloc[0]
+    assert row["k / K"] == "2 / 10"
+    assert row["study k / K"] == "5 / 9"
+    assert row["classes"] == "side-left/no-stop, side-right/no-stop, other"
+
+
+def test_runtime_speedup_is_the_studys_and_scales_to_20000_episodes():
+    table = tables.runtime_table(
+        runs(
+            [
+                ("crossing", "1.25m", "ppo-acc", 0, 0, 200.0),
+                ("crossing", "1.25m", "ppo-acc", 1, 0, 400.0),
+                ("crossing", "1.25m", "ppo-max", 0, 0, 150.0),
+            ]
+        )
+    )
+    row = table.iloc[0]
+    assert row["speedup"] == pytest.approx(0.5)  # 1 - 150 / 300
+    assert row["ppo-max per 20k (h:mm)"] == "8:20"  # 1.5 s per episode x 20,000
+    assert row["study ppo-max (h:mm)"] == "34:23"
+    assert row["study speedup"] == pytest.approx(0.186, abs=1e-3)
+    assert row["faster than the study (ppo-max)"] == pytest.approx((34 * 60 + 23) / 500)
+
+
+@pytest.mark.parametrize(
+    ("k", "n", "low", "high"),
+    [
+        (0, 10, 0.0, 1 - 0.025 ** (1 / 10)),
+        (10, 10, 0.025 ** (1 / 10), 1.0),
+        (5, 10, 0.187086, 0.812914),
+    ],
+)
+def test_clopper_pearson_matches_the_exact_interval(k, n, low, high):
+    assert tables.clopper_pearson(k, n) == pytest.approx((low, high), abs=1e-6)
+
+
+def test_failure_rates_pool_the_seeds():
+    rates = tables.failure_rates(
+        runs([("crossing", "2m", "random", 0, 3), ("crossing", "2m", "random", 1, 1)])
+    )
+    row = rates.iloc[0]
+    assert (row["failures"], row["episodes"], row["rate"]) == (4, 200, 0.02)
+    assert row["low"] < 0.02 < row["high"]
+
+
+def test_learning_curves_show_failures_rising_over_the_run():
+    outcomes = ["goal"] * 50 + ["failure", "goal"] * 25
+    episodes = pd.DataFrame(
+        {
+            "run_id": "r",
+            "tester": "ppo-max",
+            "field": "2m",
+            "episode": range(100),
+            "outcome": outcomes,
+        }
+    )
+    curve = tables.learning_curves(episodes, bins=2)
+    assert curve["episode"].tolist() == [50, 100]
+    assert curve["failures per 100 episodes"].tolist() == [0.0, 50.0]
+
+
+def test_reward_hacking_measures_time_in_field_stops_and_loitering_per_tester():
+    episodes = pd.DataFrame(
+        {
+            "tester": "ppo-acc",
+            "outcome": ["stall", "timeout", "failure", "goal"],
+            "time_in_field": [10.0, 4.0, 0.0, 2.0],
+            "estop_count": [1, 3, 0, 0],
+            "return": [20.0, 10.0, 1.0, 0.0],
+            "loitering": [True, True, False, False],
+        }
+    )
+    row = tables.reward_hacking(episodes).iloc[0]
+    assert row["time in field per episode (s)"] == 4.0
+    assert row["emergency stops per episode"] == 1.0
+    assert (row["stall share"], row["timeout share"]) == (0.25, 0.25)
+    assert row["return without failure"] == 10.0
+    assert (row["loitering episodes"], row["loitering share"]) == (2, 0.5)
+
+
+@pytest.mark.parametrize(
+    ("outcome", "stops", "in_field", "loiters"),
+    [
+        ("stall", 1, 10.0, True),
+        ("timeout", 2, 2.0, True),
+        ("goal", 3, 1.0, False),  # stops, but hardly in the field
+        ("timeout", 1, 8.0, False),  # one long stop that was not a stall
+        ("failure", 5, 9.0, False),  # a failure is what the search is after
+    ],
+)
+def test_the_loitering_rule(outcome, stops, in_field, loiters):
+    summary = {"outcome": outcome, "estop_count": stops, "time_in_field": in_field}
+    assert LoiteringRule().matches(summary) is loiters
+
+
+def test_the_representative_of_a_class_has_its_median_time_to_contact():
+    failures = pd.DataFrame(
+        {"class": ["a", "a", "a", "b"], "sim_time": [1.0, 5.0, 9.5, 3.0], "failure_id": range(4)}
+    )
+    chosen = tables.representatives(failures).set_index("class")
+    assert chosen.loc["a", "failure_id"] == 1
+    assert chosen.loc["b", "failure_id"] == 3
+
+
+def test_the_typical_loitering_episode_is_the_one_nearest_the_median():
+    loitering = pd.DataFrame(
+        {"episode": [0, 1, 2], "time_in_field": [2.0, 6.0, 30.0], "estop_count": [2, 4, 9]}
+    )
+    assert tables.typical_loitering(loitering)["episode"] == 1
+    assert tables.typical_loitering(loitering.iloc[0:0]) is None
