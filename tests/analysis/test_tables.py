@@ -182,3 +182,31 @@ def test_the_typical_loitering_episode_is_the_one_nearest_the_median():
     )
     assert tables.typical_loitering(loitering)["episode"] == 1
     assert tables.typical_loitering(loitering.iloc[0:0]) is None
+
+
+def test_lesson_2_compares_classes_found_case_by_case_and_counts_the_studys_table_too():
+    coverage = pd.DataFrame(
+        {
+            "scenario": ["crossing"] * 4 + ["head-on"] * 2,
+            "field": ["2m", "2m", "none", "none", "2m", "2m"],
+            "tester": ["random", "ppo-max", "random", "ppo-max", "random", "ppo-max"],
+            "found": [3, 5, 4, 4, 6, 1],
+        }
+    )
+    row = tables.lesson_2(coverage).iloc[0]
+    assert (row["more classes than random"], row["as many"], row["fewer"]) == (1, 1, 1)
+    # The study: ppo-max found more classes than random in 4 cases and fewer in 1 of 9.
+    assert row["study (more / as many / fewer)"] == "4 / 4 / 1"
+
+
+def test_failures_per_class_counts_each_testers_failures_of_each_class():
+    failures = pd.DataFrame(
+        {
+            "failure_id": range(4),
+            "tester": ["random", "ppo-max", "ppo-max", "ppo-max"],
+            "class": ["left/moving", "left/moving", "left/moving", "front/moving"],
+        }
+    )
+    table = tables.failures_per_class(failures).set_index("class")
+    assert table.loc["left/moving", "ppo-max"] == 2
+    assert table.loc["front/moving", "random"] == 0

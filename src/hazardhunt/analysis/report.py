@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -106,6 +107,8 @@ def write_report(directory: Path, progress: Progress | None = None) -> Path:
     tell("reading results")
     results = load_results(directory)
     report = _Report(directory / "report")
+    for stale in (report.figures, report.directory / "tables"):
+        shutil.rmtree(stale, ignore_errors=True)  # from an earlier report of fewer runs
     report.directory.mkdir(exist_ok=True)
     tell("failures per run")
     _failures_per_run(report, results)
@@ -150,6 +153,20 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, Callable[[Results], pd.DataFrame]], .
         "'other' and not counted in k.",
         "classes",
         tables.class_coverage,
+    ),
+    (
+        "Lesson 2: diversity against random sampling",
+        "In how many (scenario, field) cases each RL tester found more, as many or fewer "
+        "distinct classes than random sampling, and how often each tester found each class "
+        "(the study: RL found more failures per class, with about as many classes).",
+        "lesson_2",
+        lambda results: tables.lesson_2(tables.class_coverage(results)),
+    ),
+    (
+        "Failures per class",
+        "Failures of each class found by each tester, over all scenarios, fields and seeds.",
+        "failures_per_class",
+        lambda results: tables.failures_per_class(results.failures),
     ),
     (
         "Lesson 1: does RL find more failures than random sampling?",
@@ -350,7 +367,8 @@ h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
 th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
-figure { margin: 1em 0; } img { max-width: 100%; }
+figure { margin: 1em 1em 1em 0; display: inline-block; vertical-align: top; }
+figure.table { display: block; } img { max-width: 100%; }
 figcaption { font-size: 0.85em; color: #555; }
 .warning { color: #b00; }
 """

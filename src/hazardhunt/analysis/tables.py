@@ -64,6 +64,52 @@ def class_coverage(results: Results) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def lesson_2(coverage: pd.DataFrame) -> pd.DataFrame:
+    """Lesson 2: in how many (scenario, field) cases each tester found more, as many or fewer
+    distinct classes than random sampling (from ``class_coverage``), beside the same count
+    over the study's Table I."""
+    keys = ["scenario", "field"]
+    baseline = coverage[coverage["tester"] == BASELINE].set_index(keys)["found"]
+    rows = []
+    for tester, group in coverage[coverage["tester"] != BASELINE].groupby("tester", sort=True):
+        paired = (
+            group.set_index(keys)["found"]
+            .to_frame("tester")
+            .join(baseline.rename("baseline"), how="inner")
+        )
+        study = [
+            (found[str(tester)][0], found[BASELINE][0])
+            for found in STUDY_CLASSES.values()
+            if str(tester) in found
+        ]
+        rows.append(
+            {
+                "tester": tester,
+                "more classes than random": int((paired["tester"] > paired["baseline"]).sum()),
+                "as many": int((paired["tester"] == paired["baseline"]).sum()),
+                "fewer": int((paired["tester"] < paired["baseline"]).sum()),
+                "cases": len(paired),
+                "study (more / as many / fewer)": (
+                    f"{sum(a > b for a, b in study)} / {sum(a == b for a, b in study)} / "
+                    f"{sum(a < b for a, b in study)}"
+                    if study
+                    else ""
+                ),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def failures_per_class(failures: pd.DataFrame) -> pd.DataFrame:
+    """How often each tester found each class (all scenarios, fields and seeds)."""
+    if failures.empty or "class" not in failures:
+        return pd.DataFrame(columns=["class"])
+    counts = failures.pivot_table(
+        index="class", columns="tester", values="failure_id", aggfunc="count", fill_value=0
+    )
+    return counts.reset_index().rename_axis(columns=None)
+
+
 def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
     """Table II: mean wall time per run of ``ppo-acc`` and ``ppo-max`` and the speedup.
 
