@@ -89,7 +89,7 @@ class MechanismClassifier:
     moving_speed: float = 0.1
     """Above this speed at contact the human counts as moving, in m/s."""
     standstill_speed: float = 0.05
-    """Above this speed the robot counts as driving (SPEC 4's standstill), in m/s."""
+    """From this speed on the robot counts as driving (below it, standing: SPEC 4), in m/s."""
     edge_tolerance: float = 0.05
     """Allowance beyond the front face for an entry over the straight edge, in m."""
 
@@ -144,7 +144,7 @@ class MechanismClassifier:
         """Whether the robot drove again after the last emergency stop was released."""
         last_stop = max(i for i, row in enumerate(trajectory) if row["emergency_stop"])
         return any(
-            row["robot_speed"] > self.standstill_speed for row in trajectory[last_stop + 1 :]
+            row["robot_speed"] >= self.standstill_speed for row in trajectory[last_stop + 1 :]
         )
 
 
