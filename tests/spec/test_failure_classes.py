@@ -1,5 +1,8 @@
 """Failure classes (SPEC 6): hand-built trajectories for every class, and scripted humans."""
 
+import dataclasses
+import math
+
 import pytest
 
 from hazardhunt.env.agv import AGVEnv
@@ -10,8 +13,9 @@ from hazardhunt.spec.failure_classes import (
     classify_failures,
 )
 from hazardhunt.sut.nmpc import NMPCController
-from tests.env.test_scripted_humans import side_attack
-from tests.scripted import run, steer_towards
+from hazardhunt.world.bodies import HumanParams, RobotParams
+from hazardhunt.world.scenario import Pose, load_scenario
+from tests.scripted import Policy, keep_heading, lie_in_wait, run, steer_towards, walk_to
 
 CLASSIFIER = MechanismClassifier()
 FIELD = 1.25
@@ -151,30 +155,191 @@ def test_classify_failures_keeps_every_episode():
 
 
 # ------------------------------------------------------------------ end to end
+# Scripted humans against the real NMPC in the crossing: the robot drives east along the main
+# aisle (y = 10 m) at 1 m/s; the human starts south of it (meets the robot's right) or, in
+# FROM_THE_NORTH, north of it (meets its left).
 NMPC = NMPCController()  # built once: construction is the expensive part
+CROSSING = load_scenario("crossing")
+FROM_THE_NORTH = dataclasses.replace(CROSSING, human_start=Pose(10.0, 15.0, -math.pi / 2))
+ROUTE_Y = 10.0
+SIDES = {"left": 1.0, "right": -1.0}
+"""Which way from the route (in y) the human waits for each side of the robot."""
 
 
-def classify_episode(field, policy, scenario="crossing"):
-    env = AGVEnv(scenario, field, controller=NMPC, decision_period=0.2)
+def classify_episode(field, policy, side="right"):
+    """Play one episode in the crossing; returns the failure's class and the env."""
+    env = AGVEnv(
+        FROM_THE_NORTH if side == "left" else CROSSING, field, controller=NMPC, decision_period=0.2
+    )
     info, _ = run(env, policy)
     assert info["outcome"] == "failure"
     label = CLASSIFIER.classify(env.trajectory(), info["summary"], env.field_diameter)
     assert label in CLASSIFIER.classes_for(env.field_diameter)
-    return label
+    return label, env
 
 
-def test_a_side_attack_past_the_field_is_a_side_no_stop_failure():
-    assert classify_episode("1.25m", side_attack) == "side-right/no-stop"
+def beside_route(side, x, offset):
+    """The point ``offset`` m from the route on the robot's ``side``, at ``x``."""
+    return x, ROUTE_Y + SIDES[side] * offset
 
 
-def test_a_side_attack_without_a_field_is_a_side_failure_of_a_moving_human():
-    assert classify_episode("none", side_attack) == "right/moving"
+def towards_route(side):
+    """The heading from ``side`` straight across the route."""
+    return -SIDES[side] * math.pi / 2
+
+
+def robot_past(x):
+    """Trigger: the robot's centre has passed ``x``."""
+    return lambda env: env.robot_state.x > x
+
+
+def charge(env):
+    """Run at the robot's centre."""
+    robot = env.robot_state
+    return steer_towards(env, (robot.x, robot.y), 1.5)
+
+
+def side_attack(side) -> Policy:
+    """Wait 1.2 m beside the route and run at the robot's centre as it comes abreast."""
+    return lie_in_wait(beside_route(side, 10.0, 1.2), towards_route(side), robot_past(9.55), charge)
+
+
+def graze_the_field(side) -> Policy:
+    """Wait 1.2 m beside the route; when the robot is 1.5 m short, walk at 1.1 m/s diagonally
+    back across its path (45 degrees against its direction). The human grazes the field's corner
+    (stop), walks on past the front corner and along the side, out of the field: the released
+    robot drives off into him."""
+    heading = math.atan2(-SIDES[side] * math.sin(math.pi / 4), -math.cos(math.pi / 4))
+    return lie_in_wait(
+        beside_route(side, 9.95, 1.2),
+        heading,
+        robot_past(9.95 - 1.5),
+        lambda env: keep_heading(env, heading, 1.1),
+    )
+
+
+def cut_in_behind_the_front_corner() -> Policy:
+    """Wait 1 m right of the route; as the robot's centre passes, run at 1.5 m/s forward and in
+    at 40 degrees to its heading, a little faster along it than the robot: the human steps over
+    the field's straight edge just behind the front corner and into the side."""
+    heading = math.radians(40)
+    return lie_in_wait(
+        (9.728, ROUTE_Y - 1.0),
+        heading,
+        robot_past(9.728),
+        lambda env: keep_heading(env, heading, 1.5),
+    )
+
+
+def step_into_the_path(side, x, offset) -> Policy:
+    """Wait 1.4 m beside the route at ``x``; when the robot's centre passes 8 m, walk straight
+    to ``offset`` m from the route and stop there."""
+    target = beside_route(side, x, offset)
+    return lie_in_wait(
+        beside_route(side, x, 1.4),
+        towards_route(side),
+        robot_past(8.0),
+        lambda env: walk_to(env, target),
+    )
+
+
+def chase_the_rear() -> Policy:
+    """Wait 0.8 m right of the route; once the robot has passed, run at its centre: the human
+    reaches its rear corner slower along its heading than the robot drives."""
+    return lie_in_wait(beside_route("right", 10.0, 0.8), math.pi / 2, robot_past(10.15), charge)
+
+
+@pytest.mark.parametrize("side", list(SIDES))
+def test_a_side_attack_past_the_field_is_a_side_no_stop_failure(side):
+    label, env = classify_episode("1.25m", side_attack(side), side)
+    assert label == f"side-{side}/no-stop"
+    assert not any(row["emergency_stop"] for row in env.trajectory())
+
+
+@pytest.mark.parametrize("side", list(SIDES))
+def test_a_side_attack_without_a_field_is_a_side_failure_of_a_moving_human(side):
+    label, _ = classify_episode("none", side_attack(side), side)
+    assert label == f"{side}/moving"
 
 
 def test_a_human_charging_head_on_meets_the_swerving_robots_side_unseen_by_the_field():
-    def charge(env):
-        robot = env.robot_state
-        return steer_towards(env, (robot.x, robot.y), 1.5)
-
-    label = classify_episode("1.25m", charge, scenario="head-on")
+    env = AGVEnv("head-on", "1.25m", controller=NMPC, decision_period=0.2)
+    info, _ = run(env, charge)
+    assert info["outcome"] == "failure"
+    label = CLASSIFIER.classify(env.trajectory(), info["summary"], env.field_diameter)
     assert label in {"side-left/no-stop", "side-right/no-stop"}
+
+
+@pytest.mark.parametrize("side", list(SIDES))
+def test_a_human_grazing_the_field_then_beside_the_released_robot_is_restarted(side):
+    label, env = classify_episode("1.25m", graze_the_field(side), side)
+    assert label == f"side-{side}/restarted"
+    rows = env.trajectory()
+    stop = next(index for index, row in enumerate(rows) if row["emergency_stop"])
+    assert any(row["robot_speed"] == 0.0 for row in rows[stop:])  # the stop held it still
+    assert not rows[-1]["emergency_stop"]
+    assert rows[-1]["robot_speed"] >= 0.05  # driving again at contact
+
+
+def test_a_human_cutting_in_over_the_fields_straight_edge_is_hit_while_the_robot_brakes():
+    label, env = classify_episode("1.25m", cut_in_behind_the_front_corner())
+    assert label == "edge-entry/moving"
+    last = env.trajectory()[-1]
+    assert last["emergency_stop"]
+    assert last["robot_speed"] >= 0.05  # the stop came too late to bring it to a standstill
+
+
+@pytest.mark.parametrize(
+    ("x", "offset", "expected"),
+    [
+        (9.15, 0.0, "front/moving"),  # too late: still walking when the robot arrives
+        (9.95, 0.0, "front/standing"),  # on the route, too close for the robot to stop
+    ],
+)
+def test_a_human_stepping_onto_the_route_is_hit_by_the_front(x, offset, expected):
+    label, _ = classify_episode("none", step_into_the_path("right", x, offset))
+    assert label == expected
+
+
+@pytest.mark.parametrize("side", list(SIDES))
+def test_a_human_standing_off_centre_in_the_path_is_hit_by_the_swerving_robots_side(side):
+    label, _ = classify_episode("none", step_into_the_path(side, 10.0, 0.35), side)
+    assert label == f"{side}/standing"
+
+
+def test_a_human_chasing_the_robot_slower_than_it_drives_touches_its_rear_unsafely():
+    label, env = classify_episode("none", chase_the_rear())
+    assert label == "rear/moving"
+    assert env.trajectory()[-1]["robot_speed"] >= 0.05
+
+
+def test_the_same_chase_with_a_field_fits_no_class_and_is_kept_as_other():
+    label, env = classify_episode("1.25m", chase_the_rear())
+    assert label == OTHER
+    assert not any(row["emergency_stop"] for row in env.trajectory())  # the field never saw it
+
+
+# ------------------------------------------------------------------ unreachable classes
+def braking_travel(speed, robot=RobotParams(), physics_step=0.05, standstill=0.05):
+    """From the physics step in which the human enters the field on: how many steps the robot
+    still counts as moving at their end, and how far it drives meanwhile (m)."""
+    steps, travelled = 1, speed * physics_step  # the entry step: the stop applies from the next
+    while speed - robot.emergency_deceleration * physics_step >= standstill:
+        slower = speed - robot.emergency_deceleration * physics_step
+        travelled += (speed + slower) / 2 * physics_step
+        speed, steps = slower, steps + 1
+    return steps, travelled
+
+
+@pytest.mark.parametrize("field", [1.25, 2.0])
+def test_no_human_reaches_the_front_face_while_the_robot_brakes(field):
+    # The numbers behind "field/braking/* is unreachable" (docs/failure-classes.md): the
+    # front-face contact farthest from the field's centre (human centre at the front corner's
+    # 45-degree point) still lies further inside the field than human and robot can close.
+    robot, human = RobotParams(), HumanParams()
+    steps, travelled = braking_travel(1.0, robot)
+    closing = travelled + steps * human.max_speed * 0.05
+    diagonal = human.radius / math.sqrt(2)
+    farthest_front_contact = math.hypot(diagonal, robot.width / 2 + diagonal)
+    assert (steps, closing) == (3, pytest.approx(0.3375))
+    assert field / 2 + human.radius - farthest_front_contact > closing

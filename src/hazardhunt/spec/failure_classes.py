@@ -24,16 +24,41 @@ Without a field (8 classes):
 - ``front|left|right|rear`` ``/moving|standing``: the face touched and the human's motion.
 
 Anything else is ``other`` and kept, never dropped: a contact without a face, a front or rear
-touch the field never saw (the field covers the whole front face, so only a contact within the
-very physics step of entry can do that), a rear touch while braking, or a contact after a
-released stop without the robot driving again.
+touch the field never saw (the field covers the whole front face, so a front touch it never saw
+would need the human to cross 0.41 m of field within one physics step; a rear one happens when a
+human catches the rear corner slower than the robot drives), a rear touch while braking, or a
+contact after a released stop without the robot driving again.
 
-Reachability with the built-in NMPC (``tests/spec/test_failure_classes.py``): scripted humans
-reach ``side-*/no-stop`` and ``*/moving`` side classes as failures. The braking and edge-entry
-mechanisms do occur, but the emergency stop (7.5 m/s^2) brings the robot from cruise to a
-standstill within about 0.13 s, so the scripted attempts ended as safe contacts (robot standing);
-the NMPC also stops ahead of a human who leaves its field, so no scripted human has yet made it
-restart into one (``*/restarted``). These classes are kept for other controllers and fields.
+Reachability with the built-in NMPC (1 m/s cruise, 1.25 m field), shown by the scripted humans of
+``tests/spec/test_failure_classes.py``: ``side-*/no-stop`` and ``left|right/moving`` (run at the
+robot's side as it comes abreast), ``side-*/restarted`` (graze the field's corner diagonally, walk
+on beside the stopped robot, which drives off into the human), ``edge-entry/moving`` (cut in at
+40 degrees just behind the front corner, over the field's straight edge), ``front/moving`` and
+``front/standing`` (step onto the route too late / in time to stand), ``left|right/standing``
+(stand 0.35 m off the route's centre line; the swerving robot's side hits), ``rear/moving`` (chase
+the rear corner slower than the robot) and ``other`` (the same chase with a field).
+
+Not reached, with the reason (docs/failure-classes.md has the arithmetic):
+
+- ``field/braking/*``: unreachable. After the field triggers, the robot still counts as moving for
+  at most 3 physics steps (7.5 m/s^2 from 1 m/s), in which human (1.5 m/s) and robot close at most
+  0.34 m; every front-face contact lies at least 0.41 m (2 m field: 0.79 m) inside the field's
+  trigger boundary.
+- ``side-*/braking``: unreachable. A side contact ahead of the front face (a corner hit from ahead)
+  lies 0.38 m inside the boundary; from beside, the human would have to gain 0.3 m forward on the
+  robot. So every contact while braking is on a side with the human level with the front part of
+  the robot (at most 0.23 m ahead of its centre in a sweep over all straight and turning paths, at
+  up to 1.2 m/s): it counts as ``edge-entry``.
+- ``edge-entry/standing``: not reached. The braking robot drives at most 0.07 m more, too little
+  to close on a standing human beside it; the sweep found such a hit only with the robot turning
+  towards the human at full yaw rate as the field triggers and the human stopping dead at the very
+  next decision.
+- ``rear/standing``: not reached. The rear face moves backwards onto a standing human only while
+  the robot turns almost on the spot (speed below 0.5 rad/s x 0.25 m = 0.125 m/s, and at least
+  0.05 m/s to be a failure); the built-in routes are straight, and no scripted or searched human
+  has made the NMPC turn like that next to them.
+
+These classes are kept for other controllers, fields and scenarios.
 """
 
 from __future__ import annotations
