@@ -170,14 +170,23 @@ def campaign(
 @app.command()
 def report(
     directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
+    reclassify: Annotated[
+        bool,
+        typer.Option(
+            help="Classify every failure anew from its trajectory with the current taxonomy."
+        ),
+    ] = False,
 ) -> None:
     """Write the study's figures and tables for a run or campaign into DIRECTORY/report."""
     from hazardhunt.analysis.report import write_report
+    from hazardhunt.spec.failure_classes import MechanismClassifier
 
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
-            directory, lambda step: progress.update(task, description=f"report: {step}")
+            directory,
+            lambda step: progress.update(task, description=f"report: {step}"),
+            MechanismClassifier() if reclassify else None,
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
 

@@ -137,6 +137,13 @@ def test_a_partly_finished_campaign_reports_its_finished_runs(campaign, tmp_path
     assert unfinished.name not in set(results.episodes["run_id"])
 
 
+def test_reclassifying_from_the_stored_trajectories_gives_the_recorded_classes(campaign):
+    recorded = load_results(campaign).failures
+    anew = load_results(campaign, MechanismClassifier()).failures
+    assert len(recorded) > 0
+    assert anew["class"].tolist() == recorded["class"].tolist()
+
+
 def test_a_run_directory_is_read_as_a_one_run_result(campaign):
     run = sorted((campaign / "runs").iterdir())[0]
     results = load_results(run)

@@ -29,6 +29,7 @@ from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_f
 from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
+from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
 
 RUN_COLUMNS = (
@@ -97,15 +98,22 @@ class _Report:
         )
 
 
-def write_report(directory: Path, progress: Progress | None = None) -> Path:
+def write_report(
+    directory: Path,
+    progress: Progress | None = None,
+    classifier: FailureClassifier | None = None,
+) -> Path:
     """Write the report of a run or campaign directory; returns the path of ``index.html``.
+
+    With a ``classifier``, every failure is classified anew from its stored trajectory (for
+    another taxonomy, or runs recorded with an older one); otherwise the recorded classes count.
 
     Raises:
         ResultsError: When the directory holds no finished run.
     """
     tell = progress if progress is not None else (lambda step: None)
     tell("reading results")
-    results = load_results(directory)
+    results = load_results(directory, classifier)
     report = _Report(directory / "report")
     for stale in (report.figures, report.directory / "tables"):
         shutil.rmtree(stale, ignore_errors=True)  # from an earlier report of fewer runs

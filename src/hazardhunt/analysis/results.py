@@ -48,8 +48,13 @@ class Results:
         return Path(self.runs.set_index("run_id").at[run_id, "directory"])
 
 
-def load_results(directory: Path) -> Results:
+def load_results(directory: Path, classifier: FailureClassifier | None = None) -> Results:
     """Read a run directory or a campaign directory (its finished runs).
+
+    Args:
+        directory: A run or campaign directory.
+        classifier: Classify every failure anew from its stored trajectory with this
+            classifier (None: keep the classes recorded with the runs).
 
     Raises:
         ResultsError: When ``directory`` is neither, or nothing in it has finished.
@@ -76,7 +81,29 @@ def load_results(directory: Path) -> Results:
         name: _stacked(run_directories, summaries, f"{name}.parquet")
         for name in ("episodes", "failures", "loitering")
     }
-    return Results(directory, runs, unfinished=unfinished, **tables)
+    if classifier is None:
+        return Results(directory, runs, unfinished=unfinished, **tables)
+    tables["failures"] = _reclassified(tables["failures"], runs, classifier)
+    return Results(directory, runs, unfinished=unfinished, classifier=classifier, **tables)
+
+
+def _reclassified(
+    failures: pd.DataFrame, runs: pd.DataFrame, classifier: FailureClassifier
+) -> pd.DataFrame:
+    """``failures`` with its ``class`` column computed from the stored trajectories."""
+    classes = []
+    directories = runs.set_index("run_id")["directory"]
+    for run_id, group in failures.groupby("run_id", sort=False):
+        trajectories = pd.read_parquet(Path(directories[run_id]) / "trajectories")
+        by_failure = dict(iter(trajectories.sort_values("time").groupby("failure_id")))
+        diameter = field_diameter(str(group["field"].iloc[0]))
+        for index, row in group.iterrows():
+            samples = by_failure[row["failure_id"]].to_dict("records")
+            label = classifier.classify(samples, row.to_dict(), diameter)
+            classes.append((index, label))
+    relabelled = failures.copy()
+    relabelled["class"] = pd.Series(dict(classes), dtype=object)
+    return relabelled
 
 
 def _campaign_runs(directory: Path) -> tuple[list[Path], list[str]]:
