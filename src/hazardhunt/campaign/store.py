@@ -158,7 +158,7 @@ class RunStore:
         return len(self.failures)
 
     @property
-    def classes_found(self) -> list[str]:
+    def classes(self) -> list[str]:
         """The distinct failure classes stored so far, in the classifier's order."""
         found = {row["class"] for row in self.failures}
         return [name for name in self.classifier.classes_for(self.field_diameter) if name in found]
