@@ -23,23 +23,22 @@ from typing import Any
 
 import pandas as pd
 
-from hazardhunt.campaign.config import EnvOptions, RunConfig
+from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import execute_run
 from hazardhunt.testers import TESTER_NAMES
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 from nmpc import run_solver  # benchmarks/ is the script's directory
-
-PHYSICS_STEP = 0.05
-"""The environment's physics step, in s (to count physics steps from simulated time)."""
 
 
 def measure_run(config: RunConfig) -> dict[str, Any]:
     """Execute one run in this process and measure it."""
     with tempfile.TemporaryDirectory() as folder:
         started = time.perf_counter()
-        summary = execute_run(config, Path(folder) / "run")
+        directory = Path(folder) / "run"
+        summary = execute_run(config, directory)
         wall = time.perf_counter() - started
-        episodes = pd.read_parquet(Path(folder) / "run" / "episodes.parquet")
+        episodes = pd.read_parquet(directory / "episodes.parquet")
+        physics_step = json.loads((directory / "config.json").read_text())["physics_step"]
     solve_s = float((episodes["solves"] * episodes["solve_time_mean_s"]).sum())
     return {
         "scenario": config.scenario,
@@ -50,7 +49,7 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
         "wall_s": wall,
         "episodes_per_s": summary["episodes"] / wall,
         "decision_steps_per_s": float(episodes["decision_steps"].sum()) / wall,
-        "physics_steps_per_s": float((episodes["sim_time"] / PHYSICS_STEP).sum()) / wall,
+        "physics_steps_per_s": float((episodes["sim_time"] / physics_step).sum()) / wall,
         "solves": int(episodes["solves"].sum()),
         "solve_s": solve_s,
         "overhead_share": 1.0 - solve_s / wall,
@@ -84,7 +83,6 @@ def main() -> None:
                 tester=tester,
                 seed=args.seed,
                 episodes=args.episodes,
-                env=EnvOptions(),
             )
             with context.Pool(1) as pool:  # a fresh process: its own peak memory
                 runs.append(pool.apply(measure_run, (config,)))

@@ -14,6 +14,7 @@ from hazardhunt.spec.failure_classes import (
 )
 from hazardhunt.sut.nmpc import NMPCController
 from hazardhunt.world.bodies import HumanParams, RobotParams
+from hazardhunt.world.kinematics import step_robot
 from hazardhunt.world.scenario import Pose, load_scenario
 from tests.scripted import Policy, keep_heading, lie_in_wait, run, steer_towards, walk_to
 
@@ -324,11 +325,13 @@ def braking_travel(speed, robot=RobotParams(), physics_step=0.05, standstill=0.0
     """From the physics step in which the human enters the field on: how many steps the robot
     still counts as moving at their end, and how far it drives meanwhile (m)."""
     steps, travelled = 1, speed * physics_step  # the entry step: the stop applies from the next
-    while speed - robot.emergency_deceleration * physics_step >= standstill:
-        slower = speed - robot.emergency_deceleration * physics_step
-        travelled += (speed + slower) / 2 * physics_step
-        speed, steps = slower, steps + 1
-    return steps, travelled
+    while True:
+        motion = step_robot(
+            travelled, 0.0, 0.0, speed, 0.0, speed, 0.0, physics_step, robot, emergency_stop=True
+        )
+        if motion.speed < standstill:
+            return steps, travelled
+        travelled, speed, steps = motion.x, motion.speed, steps + 1
 
 
 @pytest.mark.parametrize("field", [1.25, 2.0])

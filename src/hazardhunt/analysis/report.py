@@ -152,7 +152,10 @@ def _failures_per_run(report: _Report, results: Results) -> None:
     report.table(section, "failures_per_run", tables.failures_per_run(results.runs))
 
 
-TABLE_SECTIONS: tuple[tuple[str, str, str, Callable[[Results], pd.DataFrame]], ...] = (
+TableSource = Callable[[Results, dict[str, pd.DataFrame]], pd.DataFrame]
+"""Computes a table from the results and the tables computed before it."""
+
+TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
     (
         "Failure classes found (Table I)",
         "Distinct failure classes found over all seeds, k / K, beside the study's own numbers. "
@@ -160,7 +163,7 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, Callable[[Results], pd.DataFrame]], .
         "and 8 without, where the study counted 9 and 8; failures no class fits are listed as "
         "'other' and not counted in k.",
         "classes",
-        tables.class_coverage,
+        lambda results, _: tables.class_coverage(results),
     ),
     (
         "Lesson 2: diversity against random sampling",
@@ -168,35 +171,36 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, Callable[[Results], pd.DataFrame]], .
         "distinct classes than random sampling, and how often each tester found each class "
         "(the study: RL found more failures per class, with about as many classes).",
         "lesson_2",
-        lambda results: tables.lesson_2(tables.class_coverage(results)),
+        lambda _, done: tables.lesson_2(done["classes"]),
     ),
     (
         "Failures per class",
         "Failures of each class found by each tester, over all scenarios, fields and seeds.",
         "failures_per_class",
-        lambda results: tables.failures_per_class(results.failures),
+        lambda results, _: tables.failures_per_class(results.failures),
     ),
     (
         "Lesson 1: does RL find more failures than random sampling?",
         "For every (scenario, field, seed) that both testers ran, whether the RL tester found "
         "more failures than random sampling with the same seed.",
         "lesson_1",
-        lambda results: tables.lesson_1(results.runs),
+        lambda results, _: tables.lesson_1(results.runs),
     ),
     (
         "Runtime: accumulated vs maximum reward (Table II)",
         "Mean wall time per run; the speedup of ppo-max is 1 - max / acc as in the study. "
         "'per 20k' scales the measured time per episode to the study's 20,000 episodes.",
         "runtime",
-        lambda results: tables.runtime_table(results.runs),
+        lambda results, _: tables.runtime_table(results.runs),
     ),
 )
-"""Sections that are one table each: title, explanation, table name, how to compute it."""
+"""Sections that are one table each: title, explanation, table name, how to compute it (from
+the results and the tables before it, by name)."""
 
 
 def _table_sections(report: _Report, results: Results) -> None:
     for title, intro, name, compute in TABLE_SECTIONS:
-        report.table(report.section(title, intro), name, compute(results))
+        report.table(report.section(title, intro), name, compute(results, report.tables))
 
 
 def _reward_hacking(report: _Report, results: Results) -> None:
@@ -356,7 +360,7 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
         "directory": str(results.directory),
         "generated_at": datetime.now(timezone.utc).isoformat(),
         "hazardhunt_version": hazardhunt.__version__,
-        "runs": records(results.runs[[c for c in RUN_COLUMNS if c in results.runs]]),
+        "runs": records(report.tables["runs"]),
         "unfinished_runs": results.unfinished,
         "lesson_1": {
             str(row["tester"]): {

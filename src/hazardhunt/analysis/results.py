@@ -11,7 +11,11 @@ import pandas as pd
 
 from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.run import is_complete
-from hazardhunt.spec.failure_classes import FailureClassifier, MechanismClassifier
+from hazardhunt.spec.failure_classes import (
+    FailureClassifier,
+    MechanismClassifier,
+    classify_failures,
+)
 from hazardhunt.sut.safety_layer import field_diameter
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
@@ -91,18 +95,22 @@ def _reclassified(
     failures: pd.DataFrame, runs: pd.DataFrame, classifier: FailureClassifier
 ) -> pd.DataFrame:
     """``failures`` with its ``class`` column computed from the stored trajectories."""
-    classes = []
+    relabelled = failures.copy()
     directories = runs.set_index("run_id")["directory"]
     for run_id, group in failures.groupby("run_id", sort=False):
-        trajectories = pd.read_parquet(Path(directories[run_id]) / "trajectories")
-        by_failure = dict(iter(trajectories.sort_values("time").groupby("failure_id")))
-        diameter = field_diameter(str(group["field"].iloc[0]))
-        for index, row in group.iterrows():
-            samples = by_failure[row["failure_id"]].to_dict("records")
-            label = classifier.classify(samples, row.to_dict(), diameter)
-            classes.append((index, label))
-    relabelled = failures.copy()
-    relabelled["class"] = pd.Series(dict(classes), dtype=object)
+        stored = pd.read_parquet(Path(directories[run_id]) / "trajectories")
+        trajectories = {
+            int(failure_id): samples.to_dict("records")
+            for failure_id, samples in stored.sort_values("time").groupby("failure_id")
+        }
+        summaries = {int(row["failure_id"]): row.to_dict() for _, row in group.iterrows()}
+        classes = classify_failures(
+            {failure_id: trajectories[failure_id] for failure_id in summaries},
+            summaries,
+            field_diameter(str(group["field"].iloc[0])),
+            classifier,
+        )
+        relabelled.loc[group.index, "class"] = [classes[i] for i in summaries]
     return relabelled
 
 

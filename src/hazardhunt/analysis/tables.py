@@ -68,27 +68,22 @@ def lesson_2(coverage: pd.DataFrame) -> pd.DataFrame:
     """Lesson 2: in how many (scenario, field) cases each tester found more, as many or fewer
     distinct classes than random sampling (from ``class_coverage``), beside the same count
     over the study's Table I."""
-    keys = ["scenario", "field"]
-    baseline = coverage[coverage["tester"] == BASELINE].set_index(keys)["found"]
     rows = []
-    for tester, group in coverage[coverage["tester"] != BASELINE].groupby("tester", sort=True):
-        paired = (
-            group.set_index(keys)["found"]
-            .to_frame("tester")
-            .join(baseline.rename("baseline"), how="inner")
-        )
+    for tester, (more, same, fewer, cases) in _against_baseline(
+        coverage, ["scenario", "field"], "found"
+    ):
         study = [
-            (found[str(tester)][0], found[BASELINE][0])
+            (found[tester][0], found[BASELINE][0])
             for found in STUDY_CLASSES.values()
-            if str(tester) in found
+            if tester in found
         ]
         rows.append(
             {
                 "tester": tester,
-                "more classes than random": int((paired["tester"] > paired["baseline"]).sum()),
-                "as many": int((paired["tester"] == paired["baseline"]).sum()),
-                "fewer": int((paired["tester"] < paired["baseline"]).sum()),
-                "cases": len(paired),
+                "more classes than random": more,
+                "as many": same,
+                "fewer": fewer,
+                "cases": cases,
                 "study (more / as many / fewer)": (
                     f"{sum(a > b for a, b in study)} / {sum(a == b for a, b in study)} / "
                     f"{sum(a < b for a, b in study)}"
@@ -149,27 +144,46 @@ def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
 def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
     """Lesson 1: in how many (scenario, field, seed) comparisons each tester found more
     failures than random sampling, beside the study's counts."""
-    keys = ["scenario", "field", "seed"]
-    baseline = runs[runs["tester"] == BASELINE].set_index(keys)["failures"]
     rows = []
-    for tester, group in runs[runs["tester"] != BASELINE].groupby("tester", sort=True):
-        paired = (
-            group.set_index(keys)["failures"]
-            .to_frame("tester")
-            .join(baseline.rename("baseline"), how="inner")
-        )
-        study = STUDY_LESSON_1.get(str(tester))
+    for tester, (more, same, fewer, comparisons) in _against_baseline(
+        runs, ["scenario", "field", "seed"], "failures"
+    ):
+        study = STUDY_LESSON_1.get(tester)
         rows.append(
             {
                 "tester": tester,
-                "more failures than random": int((paired["tester"] > paired["baseline"]).sum()),
-                "ties": int((paired["tester"] == paired["baseline"]).sum()),
-                "fewer": int((paired["tester"] < paired["baseline"]).sum()),
-                "comparisons": len(paired),
+                "more failures than random": more,
+                "ties": same,
+                "fewer": fewer,
+                "comparisons": comparisons,
                 "study": f"{study[0]} of {study[1]}" if study else "",
             }
         )
     return pd.DataFrame(rows)
+
+
+def _against_baseline(
+    table: pd.DataFrame, keys: list[str], value: str
+) -> list[tuple[str, tuple[int, int, int, int]]]:
+    """Per tester but the baseline, sorted: in how many cases (rows with the same ``keys`` as a
+    baseline row) its ``value`` is larger, equal or smaller than the baseline's, and the cases."""
+    baseline = table[table["tester"] == BASELINE].set_index(keys)[value].rename("baseline")
+    counts = []
+    for tester, group in table[table["tester"] != BASELINE].groupby("tester", sort=True):
+        paired = group.set_index(keys)[value].to_frame("own").join(baseline, how="inner")
+        own, other = paired["own"], paired["baseline"]
+        counts.append(
+            (
+                str(tester),
+                (
+                    int((own > other).sum()),
+                    int((own == other).sum()),
+                    int((own < other).sum()),
+                    len(paired),
+                ),
+            )
+        )
+    return counts
 
 
 def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
