@@ -269,6 +269,9 @@ class RaisingSolver:
     def __call__(self, **arguments: Any) -> dict[str, Any]:
         raise RuntimeError("injected CasADi failure")
 
+    def solve(self, x0: Any, p: Any) -> Any:  # the compiled solver's call
+        raise RuntimeError("injected solver failure")
+
 
 class NaNSolver:
     """The real solver, with its solution replaced by NaN."""
@@ -284,7 +287,13 @@ class NaNSolver:
     def stats(self) -> dict[str, Any]:
         return dict(self.solver.stats())
 
+    def solve(self, x0: Any, p: Any) -> Any:  # the compiled solver's call
+        result = self.solver.solve(x0, p)
+        result.x = np.full_like(result.x, np.nan)
+        return result
 
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 @pytest.mark.parametrize(
     ("make_solver", "status"),
     [(lambda real: RaisingSolver(), "RuntimeError"), (NaNSolver, "non-finite")],
@@ -292,16 +301,22 @@ class NaNSolver:
 def test_a_failed_solve_brakes_instead_of_raising(
     make_solver: Any,
     status: str,
+    compiled: bool,
     crossing: Scenario,
     crossing_route: Route,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    controller = NMPCController()
+    controller = NMPCController(NMPCParams(compiled=compiled))
     robot = RobotState(6.0, 10.0, 0.0, 1.0, 0.2)
     controller.reset(crossing.floor, crossing_route, robot)
     problem = controller._problem
-    for name in ("solver", "cold_solver"):  # warm-started and from-rollout solves
-        monkeypatch.setattr(problem, name, make_solver(getattr(problem, name)))
+    if compiled:
+        assert problem.compiled is not None
+        faulty = tuple(make_solver(solver) for solver in problem.compiled)
+        monkeypatch.setattr(problem, "compiled", faulty)
+    else:
+        for name in ("solver", "cold_solver"):  # warm-started and from-rollout solves
+            monkeypatch.setattr(problem, name, make_solver(getattr(problem, name)))
 
     command = controller.control(0.0, robot, None)
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.geometry import distances_to_segments
 from hazardhunt.world.kinematics import step_human, step_robot
 from hazardhunt.world.scenario import load_scenario
 
@@ -78,3 +79,19 @@ def test_emergency_stop_brakes_at_7_5_and_stops_turning():
             True,
         )
     assert motion.speed == 0.0
+
+
+def test_disc_blocked_agrees_with_the_edge_arrays_everywhere_on_the_floor():
+    # The scalar fast path must answer exactly as the vectorised distance and even-odd tests.
+    floor = load_scenario("crossing").floor
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.5, 20.5, size=(4000, 2))
+    radius = 0.25
+    blocked = [floor.disc_blocked(p, radius) for p in points]
+    distances = distances_to_segments(points, floor.edges)
+    expected = [
+        not floor.on_floor(p, radius) or d < radius or floor.inside_obstacle(p)
+        for p, d in zip(points, distances, strict=True)
+    ]
+    assert blocked == expected
+    assert 0.2 < np.mean(blocked) < 0.8  # both answers are exercised

@@ -19,6 +19,7 @@ predicted human) enters as parameters, so a call only fills numpy arrays and run
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from time import perf_counter
 from typing import Any, Literal
@@ -27,6 +28,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.sut.compiled import CompiledSolver, CompileError, compile_solvers
 from hazardhunt.sut.prediction import predict_constant_acceleration
 from hazardhunt.sut.protocols import ControlCommand, RobotState, TrackedHuman
 from hazardhunt.sut.route import Route
@@ -43,6 +45,7 @@ acceleration (rad/s^2), obstacle slack (m) and keep-out slack (m^2)."""
 _SPEED, _YAW_RATE = 3, 4
 _ACCELERATIONS = slice(5, 7)
 _OBSTACLE_SLACK, _KEEP_OUT_SLACK = 7, 8
+_BOUNDS = ("lbx", "ubx", "lbg", "ubg")
 _DISABLED_OFFSET = -1.0
 """Right-hand side of an unused obstacle slot: with a zero normal the row reads slack >= -1."""
 
@@ -122,9 +125,16 @@ class NMPCParams:
     absolute and relative (fatrop's ``bound_push``/``bound_frac``, IPOPT's
     ``warm_start_*_push``/``_frac``; defaults 1e-2); small so that inactive slacks stay near
     zero."""
+    compiled: bool = True
+    """Solve with fatrop's solver generated as C code and compiled by gcc
+    (:mod:`hazardhunt.sut.compiled`): the same iterates, without CasADi's per-call bookkeeping.
+    The first controller of a problem compiles it (about 5 s), later ones load it from the disk
+    cache. Without a C compiler the interpreted solver is used, with a warning. Ignored by
+    ``ipopt``."""
     jit: bool = False
-    """Compile the problem's functions with CasADi's JIT and gcc: about 20 s more to build (and
-    to unpickle), about 25 % less time per solve."""
+    """Compile the problem's functions with CasADi's JIT and gcc for the interpreted solver
+    (``compiled=False`` or ``ipopt``): about 20 s more to build (and to unpickle), about 25 %
+    less time per solve."""
 
     def __post_init__(self) -> None:
         positive = {
@@ -370,6 +380,19 @@ class _Problem:
         self._variable_maps(params.horizon)
         self._constraint_maps(dynamics_rows, path_rows, len(equality))
         self._bounds(robot)
+        self.compiled: tuple[CompiledSolver, CompiledSolver] | None = None
+        if params.compiled and params.solver == "fatrop":
+            try:
+                warm, cold = compile_solvers([self.solver, self.cold_solver])
+            except CompileError as error:
+                warnings.warn(
+                    f"the NMPC runs on CasADi's interpreted solver: {error}", stacklevel=3
+                )
+            else:
+                bounds = [np.asarray(self.fixed_arguments[k]).ravel() for k in _BOUNDS]
+                for compiled in (warm, cold):
+                    compiled.set_fixed(*bounds)
+                self.compiled = (warm, cold)
 
     def _formulate(
         self,
@@ -551,6 +574,8 @@ class _Problem:
             parameters: From :meth:`parameters`.
             warm: Whether ``guess`` is a shifted solution (else a rollout).
         """
+        if self.compiled is not None:
+            return self._solve_compiled(guess, parameters, warm)
         solver = self.solver if warm else self.cold_solver
         arguments: dict[str, Any] = {
             "x0": guess.stages.ravel()[self.variable_index],
@@ -564,24 +589,48 @@ class _Problem:
             arguments["lam_g0"] = guess.constraint_multipliers
         result = solver(**arguments)
         stats = solver.stats()
+        outcome = self._outcome(
+            np.asarray(result["x"].nonzeros()),
+            float(result["f"]),
+            bool(stats.get("success", False)),
+            stats.get("return_status", "unknown"),
+            float(stats.get("iter_count", -1)),
+        )
+        if with_multipliers:
+            outcome.plan.bound_multipliers = np.array(result["lam_x"].nonzeros())
+            outcome.plan.constraint_multipliers = np.array(result["lam_g"].nonzeros())
+        return outcome
+
+    def _solve_compiled(self, guess: _Plan, parameters: FloatArray, warm: bool) -> _Outcome:
+        """:meth:`solve` on the compiled fatrop solver."""
+        assert self.compiled is not None
+        solver = self.compiled[0] if warm else self.compiled[1]
+        result = solver.solve(guess.stages.ravel()[self.variable_index], parameters)
+        return self._outcome(
+            result.x, result.cost, result.success, result.status, float(result.iterations)
+        )
+
+    def _outcome(
+        self, x: FloatArray, cost: float, success: bool, status: object, iterations: float
+    ) -> _Outcome:
+        """The solver's flat solution and statistics as an outcome."""
         flat = np.zeros((self.params.horizon + 1) * _STAGE)
-        flat[self.variable_index] = result["x"].nonzeros()
+        flat[self.variable_index] = x
         stages = flat.reshape(self.params.horizon + 1, _STAGE)
         stages[-1, _ACCELERATIONS] = stages[-2, _ACCELERATIONS]
-        plan = _Plan(stages)
-        if with_multipliers:
-            plan.bound_multipliers = np.array(result["lam_x"].nonzeros())
-            plan.constraint_multipliers = np.array(result["lam_g"].nonzeros())
         finite = bool(np.all(np.isfinite(stages)))
-        success = bool(stats.get("success", False)) and finite
-        status = _status_name(stats.get("return_status", "unknown")) if finite else "non-finite"
         extras = {
-            "iterations": float(stats.get("iter_count", -1)),
-            "cost": float(result["f"]),
+            "iterations": iterations,
+            "cost": cost,
             "keep_out_slack": float(np.max(stages[:, _KEEP_OUT_SLACK])),
             "obstacle_slack": float(np.max(stages[:, _OBSTACLE_SLACK])),
         }
-        return _Outcome(success, status, plan, extras)
+        return _Outcome(
+            success and finite,
+            _status_name(status) if finite else "non-finite",
+            _Plan(stages),
+            extras,
+        )
 
     def shift(self, plan: _Plan) -> _Plan:
         """The plan one stage later: stages move forward, the last one coasts for a stage."""

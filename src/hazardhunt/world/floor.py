@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +44,15 @@ class FloorMap:
     """All obstacle edges, shape (E, 2, 2), for fast clearance queries."""
     edge_owner: NDArray[np.intp] = field(init=False, repr=False, compare=False)
     """Shape (E,): index of the obstacle each edge belongs to."""
+    bounding_boxes: tuple[tuple[float, float, float, float], ...] = field(
+        init=False, repr=False, compare=False
+    )
+    """Per obstacle (x min, y min, x max, y max), in m."""
+    _edge_lists: tuple[tuple[tuple[float, ...], ...], ...] = field(
+        init=False, repr=False, compare=False
+    )
+    """Per obstacle its edges as (start x, start y, end x, end y), Python floats for scalar
+    queries."""
 
     def __post_init__(self) -> None:
         polygons = [o.polygon for o in self.obstacles]
@@ -51,6 +61,19 @@ class FloorMap:
         object.__setattr__(
             self, "edge_owner", np.concatenate(owners) if owners else np.zeros(0, dtype=np.intp)
         )
+        boxes = tuple(
+            (float(p[:, 0].min()), float(p[:, 1].min()), float(p[:, 0].max()), float(p[:, 1].max()))
+            for p in polygons
+        )
+        object.__setattr__(self, "bounding_boxes", boxes)
+        edge_lists = tuple(
+            tuple(
+                (float(a[0]), float(a[1]), float(b[0]), float(b[1]))
+                for a, b in zip(p, np.roll(p, -1, axis=0), strict=True)
+            )
+            for p in polygons
+        )
+        object.__setattr__(self, "_edge_lists", edge_lists)
 
     def inside_obstacle(self, point: FloatArray) -> bool:
         """Whether a point lies strictly inside any obstacle (even-odd rule, all at once)."""
@@ -95,7 +118,17 @@ class FloorMap:
         """Whether a disc overlaps an obstacle or leaves the floor."""
         if not self.on_floor(center, radius):
             return True
-        return self.boundary_distance(center) < radius or self.inside_obstacle(center)
+        x, y = float(center[0]), float(center[1])
+        limit = radius * radius
+        for box, edges in zip(self.bounding_boxes, self._edge_lists, strict=True):
+            x_min, y_min, x_max, y_max = box
+            dx = max(x_min - x, 0.0, x - x_max)
+            dy = max(y_min - y, 0.0, y - y_max)
+            # A disc at least ``radius`` from an obstacle's bounding box is at least that far
+            # from the obstacle and outside it: most queries end here.
+            if dx * dx + dy * dy < limit and _disc_meets_polygon(x, y, radius, edges):
+                return True
+        return False
 
     def on_floor(self, point: FloatArray, margin: float = 0.0) -> bool:
         """Whether a point lies on the floor at least ``margin`` from its outer edge."""
@@ -105,3 +138,24 @@ class FloorMap:
     def in_blind_zone(self, point: FloatArray) -> bool:
         """Whether the cameras cannot see a point."""
         return any(point_in_polygon(point, zone) for zone in self.blind_zones)
+
+
+def _disc_meets_polygon(
+    x: float, y: float, radius: float, edges: tuple[tuple[float, ...], ...]
+) -> bool:
+    """Whether a disc comes closer than ``radius`` to a polygon's boundary or has its centre
+    strictly inside (even-odd rule); the arithmetic of ``distances_to_segments`` and
+    ``inside_obstacle`` for one point and one polygon."""
+    inside = False
+    for start_x, start_y, end_x, end_y in edges:
+        dx, dy = end_x - start_x, end_y - start_y
+        length_sq = dx * dx + dy * dy
+        ox, oy = x - start_x, y - start_y
+        t = (ox * dx + oy * dy) / (length_sq if length_sq > 0 else 1.0)
+        t = min(max(t, 0.0), 1.0)
+        gx, gy = ox - t * dx, oy - t * dy
+        if math.sqrt(gx * gx + gy * gy) < radius:
+            return True
+        if (start_y > y) != (end_y > y) and x < start_x + (y - start_y) * dx / dy:
+            inside = not inside
+    return inside
