@@ -23,9 +23,15 @@ from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 
 def run_solver(solver: str, episodes: int, field: str, seed: int) -> dict[str, Any]:
-    # "fatrop-jit": fatrop with the problem's functions compiled by CasADi's JIT (gcc).
+    # "fatrop": the compiled solver (the default); "fatrop-interpreted": CasADi's interpreted
+    # fatrop; "fatrop-jit": that with the problem's functions compiled by CasADi's JIT (gcc).
     name, _, variant = solver.partition("-")
-    controller = NMPCController(NMPCParams(solver=name, jit=variant == "jit"))  # type: ignore[arg-type]
+    params = NMPCParams(
+        solver=name,  # type: ignore[arg-type]
+        compiled=variant == "",
+        jit=variant == "jit",
+    )
+    controller = NMPCController(params)
     solve_times: list[float] = []
     failed = decisions = physics_steps = episode_count = 0
     outcomes: dict[str, int] = {}
@@ -76,7 +82,10 @@ def main() -> None:
     parser.add_argument("--field", default="1.25m")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
-        "--solvers", nargs="+", default=["fatrop", "ipopt"], help="fatrop, ipopt, fatrop-jit"
+        "--solvers",
+        nargs="+",
+        default=["fatrop", "fatrop-interpreted", "ipopt"],
+        help="fatrop (compiled), fatrop-interpreted, fatrop-jit, ipopt",
     )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/nmpc.json"))
     args = parser.parse_args()

@@ -2,7 +2,9 @@
 
 Each run is ``execute_run`` (what ``hazardhunt run`` does) in a fresh process, one at a time, so
 that its peak memory is its own and nothing else competes for the cores. For every run: episodes
-and env steps per second, the share of wall time spent outside the NMPC solve (overhead), and
+and env steps per second, the share of wall time spent outside the NMPC solver's call
+(overhead), the share spent outside the controller altogether (its solver call and the Python
+that prepares it: references, obstacle half-planes, the human's prediction, the warm start), and
 the peak resident memory. The solver part is ``benchmarks/nmpc.py``'s closed loop. Prints tables
 and writes JSON.
 
@@ -25,6 +27,7 @@ import pandas as pd
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import execute_run
+from hazardhunt.sut.nmpc import NMPCController
 from hazardhunt.testers import TESTER_NAMES
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 from nmpc import run_solver  # benchmarks/ is the script's directory
@@ -32,6 +35,17 @@ from nmpc import run_solver  # benchmarks/ is the script's directory
 
 def measure_run(config: RunConfig) -> dict[str, Any]:
     """Execute one run in this process and measure it."""
+    controller_s = [0.0]
+    control = NMPCController.control
+
+    def timed_control(self: NMPCController, *args: Any) -> Any:
+        started = time.perf_counter()
+        try:
+            return control(self, *args)
+        finally:
+            controller_s[0] += time.perf_counter() - started
+
+    NMPCController.control = timed_control  # type: ignore[method-assign]
     with tempfile.TemporaryDirectory() as folder:
         started = time.perf_counter()
         directory = Path(folder) / "run"
@@ -53,6 +67,8 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
         "solves": int(episodes["solves"].sum()),
         "solve_s": solve_s,
         "overhead_share": 1.0 - solve_s / wall,
+        "controller_s": controller_s[0],
+        "outside_controller_share": 1.0 - controller_s[0] / wall,
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     }
 
@@ -65,7 +81,10 @@ def main() -> None:
     parser.add_argument("--testers", nargs="+", default=list(TESTER_NAMES))
     parser.add_argument("--scenarios", nargs="+", default=list(BUILTIN_SCENARIOS))
     parser.add_argument(
-        "--solvers", nargs="+", default=["fatrop", "ipopt"], help="fatrop, ipopt, fatrop-jit"
+        "--solvers",
+        nargs="+",
+        default=["fatrop", "fatrop-interpreted", "ipopt"],
+        help="fatrop (compiled), fatrop-interpreted, fatrop-jit, ipopt",
     )
     parser.add_argument(
         "--solver-episodes", type=int, default=10, help="episodes per scenario and solver"
@@ -89,13 +108,14 @@ def main() -> None:
     print(f"runs of {args.episodes} episodes, field {args.field}, one process at a time")
     print(
         f"{'tester':8} {'scenario':11} {'episodes/s':>10} {'decisions/s':>11} "
-        f"{'physics/s':>9} {'overhead':>8} {'peak MiB':>8} {'failures':>8}"
+        f"{'physics/s':>9} {'overhead':>8} {'no ctrl':>8} {'peak MiB':>8} {'failures':>8}"
     )
     for r in runs:
         print(
             f"{r['tester']:8} {r['scenario']:11} {r['episodes_per_s']:10.2f} "
             f"{r['decision_steps_per_s']:11.1f} {r['physics_steps_per_s']:9.0f} "
-            f"{100 * r['overhead_share']:7.1f}% {r['peak_rss_mib']:8.0f} {r['failures']:8d}"
+            f"{100 * r['overhead_share']:7.1f}% {100 * r['outside_controller_share']:7.1f}% "
+            f"{r['peak_rss_mib']:8.0f} {r['failures']:8d}"
         )
 
     solvers = [

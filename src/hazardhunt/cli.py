@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 import numpy as np
 import typer
@@ -93,6 +99,13 @@ def run_command(
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
+    tester_param: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="A tester parameter as KEY=VALUE (TOML value), e.g. n_envs=2 or n_steps=1024; "
+            "repeat for several."
+        ),
+    ] = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
@@ -109,6 +122,7 @@ def run_command(
             seed=seed,
             episodes=episodes,
             env=EnvOptions(decision_period=decision_period, solver=solver),
+            tester_params=_tester_params(tester_param or []),
         )
     )
     summary = run_into(config, out, console=err_console)
@@ -116,6 +130,20 @@ def run_command(
         print(json.dumps(summary))
     else:
         _print_run_summary(summary, out)
+
+
+def _tester_params(assignments: list[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` strings as a dict; VALUE is read as TOML, and as a string if it is none."""
+    params: dict[str, Any] = {}
+    for assignment in assignments:
+        key, separator, value = assignment.partition("=")
+        if not separator or not key.strip():
+            raise ConfigError(f"--tester-param: {assignment!r} is not KEY=VALUE")
+        try:
+            params[key.strip()] = tomllib.loads(f"value = {value}")["value"]
+        except tomllib.TOMLDecodeError:
+            params[key.strip()] = value
+    return params
 
 
 @app.command()

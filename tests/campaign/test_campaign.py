@@ -187,6 +187,11 @@ def test_ray_records_the_same_episodes_as_local(
         pytest.param(
             GRID + "[tester.greedy]\nn_steps = 8\n", "tester.greedy: unknown", id="tester-table"
         ),
+        pytest.param(
+            GRID + "[tester.ppo-max]\nn_step = 8\n",
+            "tester: tester 'ppo-max': unknown parameter 'n_step'",
+            id="tester-parameter",
+        ),
         pytest.param(GRID.replace(f"= {EPISODES}", "= 0"), "episodes", id="no-episodes"),
         pytest.param(GRID.replace("[0, 1]", "[]"), "seeds", id="no-seeds"),
         pytest.param(None, "no such campaign file", id="missing-file"),

@@ -58,6 +58,11 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
         ({"field": "3m"}, "field: unknown field '3m'"),
         ({"tester": "genetic"}, "tester: unknown tester 'genetic'"),
         ({"episodes": 0}, "episodes: Input should be greater than 0"),
+        ({"tester-param": "n_envs"}, "'n_envs' is not KEY=VALUE"),
+        (
+            {"tester": "ppo-max", "tester-param": "n_env=2"},
+            "tester_params: tester 'ppo-max': unknown parameter 'n_env'",
+        ),
     ],
 )
 def test_bad_input_is_one_clear_line_and_writes_nothing(tmp_path, override, message):

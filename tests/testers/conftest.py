@@ -20,6 +20,13 @@ CASES = {
         "tester": "ppo-acc",
         "tester_params": SMALL_PPO,
     },
+    # Two copies of the env in worker processes, their episodes recorded as they end.
+    "ppo-max-2-envs": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "ppo-max",
+        "tester_params": SMALL_PPO | {"n_envs": 2},
+    },
 }
 
 

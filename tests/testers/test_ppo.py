@@ -4,10 +4,12 @@ import json
 from typing import Any
 
 import gymnasium as gym
+import pandas as pd
 import pytest
 from stable_baselines3 import PPO
 
 from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import make_env
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.testers import make_tester
@@ -45,11 +47,22 @@ def test_effective_hyperparameters_are_saved(first_run):
         ({"seed": 3}, "tester 'ppo-max': parameter 'seed' is set by hazardhunt"),
         ({"env": "CartPole-v1"}, "parameter 'env' is set by hazardhunt"),
         ({"device": "cuda"}, "parameter 'device' is set by hazardhunt"),
+        ({"n_envs": 0}, "n_envs must be a whole number >= 1, not 0"),
     ],
 )
 def test_bad_parameters_are_clear_errors(params, message):
     with pytest.raises(ValueError, match=message):
         make_tester("ppo-max", 0, params)
+
+
+def test_failures_found_by_parallel_envs_replay_exactly(seeded_run):
+    run = seeded_run("ppo-max-2-envs", 0)
+    failures = pd.read_parquet(run / "failures.parquet")
+    assert len(failures) > 0
+    for failure_id in failures["failure_id"]:
+        assert replay_failure(run, int(failure_id)).matches
+    saved = json.loads((run / "tester" / "hyperparameters.json").read_text())
+    assert saved["n_envs"] == 2
 
 
 class StepLog(gym.Wrapper):

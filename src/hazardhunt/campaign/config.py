@@ -7,10 +7,18 @@ import sys
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
-from hazardhunt.testers import TESTER_NAMES
+from hazardhunt.testers import TESTER_NAMES, make_tester
 from hazardhunt.world.scenario import format_validation_error
 
 if sys.version_info >= (3, 11):
@@ -94,6 +102,13 @@ class RunConfig(_Strict):
     tester_params: dict[str, Any] = {}
     """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
 
+    @field_validator("tester_params")
+    @classmethod
+    def _tester_accepts_params(cls, values: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
+        if "tester" in info.data:  # else the tester's own error is reported
+            _check_tester_params(info.data["tester"], values)
+        return values
+
     @property
     def run_id(self) -> str:
         """A file-system-safe name for the run, unique within a campaign."""
@@ -112,6 +127,15 @@ class CampaignConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester: dict[TesterName, dict[str, Any]] = {}
     """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
+
+    @field_validator("tester")
+    @classmethod
+    def _testers_accept_params(
+        cls, values: dict[TesterName, dict[str, Any]]
+    ) -> dict[TesterName, dict[str, Any]]:
+        for name, params in values.items():
+            _check_tester_params(name, params)
+        return values
 
     @field_validator("seeds")
     @classmethod
@@ -139,6 +163,12 @@ class CampaignConfig(_Strict):
             for tester in self.testers
             for seed in self.seeds
         ]
+
+
+def _check_tester_params(tester: str, params: dict[str, Any]) -> None:
+    """Raises ValueError when tester ``tester`` does not accept ``params``."""
+    if params:
+        make_tester(tester, 0, params)  # builds no model: only checks the parameters
 
 
 def load_campaign(path: Path) -> CampaignConfig:

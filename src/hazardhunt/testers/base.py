@@ -58,17 +58,30 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
         if terminated or truncated:
-            summary = info["summary"]
-            agv = self.agv
-            record = EpisodeRecord(
-                index=self.episodes_done,
-                summary=summary,
-                actions=agv.episode_actions,
-                trajectory=agv.trajectory() if self.keep_trajectory(summary) else [],
-            )
-            self.episodes_done += 1
-            self.on_episode(record)
+            self.record(*finished_episode(self.agv, info, self.keep_trajectory))
         return observation, float(reward), terminated, truncated, info
+
+    def record(
+        self,
+        summary: dict[str, Any],
+        actions: NDArray[np.float32],
+        trajectory: list[dict[str, Any]],
+    ) -> None:
+        """Hand a finished episode to ``on_episode`` as the run's next one (also for episodes
+        that copies of the env ran in worker processes)."""
+        record = EpisodeRecord(self.episodes_done, summary, actions, trajectory)
+        self.episodes_done += 1
+        self.on_episode(record)
+
+
+def finished_episode(
+    agv: AGVEnv, info: dict[str, Any], keep_trajectory: Callable[[dict[str, Any]], bool]
+) -> tuple[dict[str, Any], NDArray[np.float32], list[dict[str, Any]]]:
+    """Summary, actions and (when ``keep_trajectory`` says so) trajectory of the episode that
+    ``agv`` has just ended with ``info``."""
+    summary = info["summary"]
+    trajectory = agv.trajectory() if keep_trajectory(summary) else []
+    return summary, agv.episode_actions, trajectory
 
 
 @runtime_checkable

@@ -10,19 +10,33 @@ from __future__ import annotations
 import inspect
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
+from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.base import EpisodeRecorder, finished_episode
 
 RESERVED_PARAMETERS = frozenset({"policy", "env", "seed", "device", "verbose", "_init_setup_model"})
 """PPO arguments the tester sets itself: the run owns the env and the seed, and SPEC fixes
 the policy (``MlpPolicy``) and the device (CPU, for reproducible runs)."""
+
+
+TESTER_PARAMETERS = {
+    "n_envs": "copies of the environment stepped at once, each in its own worker process "
+    "(SB3's SubprocVecEnv); PPO collects n_steps decisions from each before it updates "
+    "(default 1: one env in the run's process)",
+}
+"""Parameters of the tester itself, next to PPO's own."""
 
 
 def ppo_defaults() -> dict[str, Any]:
@@ -65,6 +79,9 @@ class PPOTester:
             ValueError: A key of ``params`` is no PPO argument or one the tester sets itself.
         """
         params = dict(params or {})
+        n_envs = params.pop("n_envs", 1)
+        if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
+            raise ValueError(f"tester {name!r}: n_envs must be a whole number >= 1, not {n_envs!r}")
         defaults = ppo_defaults()
         for key in params:
             if key in RESERVED_PARAMETERS:
@@ -75,12 +92,14 @@ class PPOTester:
             if key not in defaults:
                 raise ValueError(
                     f"tester {name!r}: unknown parameter {key!r}; "
-                    f"PPO accepts {', '.join(sorted(defaults))}"
+                    f"PPO accepts {', '.join(sorted(defaults))}; the tester accepts "
+                    f"{', '.join(TESTER_PARAMETERS)}"
                 )
         self.name = name
         self.reward: RewardKind = reward
         self.seed = seed
         self.params = params
+        self.n_envs = n_envs
         self.hyperparameters = defaults | params
         """The effective PPO arguments (defaults overridden by ``params``)."""
         self.model: PPO | None = None
@@ -89,26 +108,35 @@ class PPOTester:
         """Learn on ``env`` until it has recorded ``episodes`` episodes.
 
         Each call starts a fresh policy. SB3 seeds the env's first reset with ``seed`` and
-        resets it unseeded after every episode.
+        resets it unseeded after every episode. With ``n_envs`` > 1, copies of ``env`` run in
+        worker processes and their episodes are recorded in the order they end (by env index
+        within one step); episodes beyond the budget that end in the last step are dropped.
         """
         # SPEC 9: one thread per process; more only contend with the NMPC and other runs.
         torch.set_num_threads(1)
-        self.model = PPO(
-            "MlpPolicy",
-            env,
-            seed=self.seed,
-            device="cpu",
-            verbose=0,
-            **self.params,
-        )
-        agv = env.agv
-        most_steps_per_episode = math.ceil(agv.termination.episode_duration / agv.decision_period)
-        # SB3 needs a length; this bound (every episode timing out) is never reached because
-        # the callback ends learning at the episode budget.
-        self.model.learn(
-            total_timesteps=episodes * most_steps_per_episode,
-            callback=StopAtEpisodeBudget(env, episodes),
-        )
+        learning_env: gym.Env[Any, Any] | VecEnv = env
+        if self.n_envs > 1:
+            learning_env = RecordingVecEnv(env, self.n_envs, episodes)
+        try:
+            self.model = PPO(
+                "MlpPolicy",
+                learning_env,
+                seed=self.seed,
+                device="cpu",
+                verbose=0,
+                **self.params,
+            )
+            agv = env.agv
+            most_steps = math.ceil(agv.termination.episode_duration / agv.decision_period)
+            # SB3 needs a length; this bound (every episode timing out) is never reached
+            # because the callback ends learning at the episode budget.
+            self.model.learn(
+                total_timesteps=episodes * most_steps,
+                callback=StopAtEpisodeBudget(env, episodes),
+            )
+        finally:
+            if isinstance(learning_env, VecEnv):
+                learning_env.close()
         if env.episodes_done != episodes:
             raise RuntimeError(
                 f"tester {self.name!r} recorded {env.episodes_done} episodes, not {episodes}"
@@ -131,9 +159,64 @@ class PPOTester:
             "policy": "MlpPolicy",
             "seed": self.seed,
             "device": "cpu",
+            "n_envs": self.n_envs,
             "timesteps": self.model.num_timesteps,
             **self.hyperparameters,
         }
         (directory / "hyperparameters.json").write_text(
             json.dumps(settings, indent=2, default=str) + "\n", encoding="utf-8"
         )
+
+
+_EPISODE = "hazardhunt_episode"
+"""Info key under which a worker's env returns the episode it has just ended."""
+
+
+class _EpisodeReporter(gym.Wrapper[Any, Any, Any, Any]):
+    """In a worker process: adds the finished episode's record to the info of its last step."""
+
+    def __init__(
+        self, env: gym.Env[Any, Any], keep_trajectory: Callable[[dict[str, Any]], bool]
+    ) -> None:
+        super().__init__(env)
+        self.keep_trajectory = keep_trajectory
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        if terminated or truncated:
+            agv = self.env.unwrapped
+            assert isinstance(agv, AGVEnv)
+            info = {**info, _EPISODE: finished_episode(agv, info, self.keep_trajectory)}
+        return observation, float(reward), terminated, truncated, info
+
+
+class _ReporterFactory:
+    """Builds a worker's env from a pickled copy of the run's env."""
+
+    def __init__(self, recorder: EpisodeRecorder) -> None:
+        self.env = recorder.agv
+        self.keep_trajectory = recorder.keep_trajectory
+
+    def __call__(self) -> gym.Env[Any, Any]:
+        return _EpisodeReporter(self.env, self.keep_trajectory)
+
+
+class RecordingVecEnv(VecEnvWrapper):
+    """``n_envs`` copies of the recorder's env in worker processes, whose finished episodes the
+    recorder records as if they had run in the run's own process (until the budget)."""
+
+    def __init__(self, recorder: EpisodeRecorder, n_envs: int, budget: int) -> None:
+        super().__init__(SubprocVecEnv([_ReporterFactory(recorder)] * n_envs))
+        self.recorder = recorder
+        self.budget = budget
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observations, rewards, dones, infos = self.venv.step_wait()
+        for info in infos:
+            episode = info.pop(_EPISODE, None)
+            if episode is not None and self.recorder.episodes_done < self.budget:
+                self.recorder.record(*episode)
+        return observations, np.asarray(rewards), dones, infos
