@@ -27,7 +27,12 @@ from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
 from hazardhunt.sut.safety_layer import LaserSafetyLayer, field_diameter
 from hazardhunt.sut.tracking import HumanTracker
 from hazardhunt.world.bodies import HumanParams, RobotParams
-from hazardhunt.world.geometry import disc_rectangle_clearance, rectangle_face, to_body_frame
+from hazardhunt.world.geometry import (
+    disc_rectangle_clearance,
+    point_rectangle_clearance,
+    rectangle_face,
+    to_body_frame,
+)
 from hazardhunt.world.kinematics import step_human, step_robot
 from hazardhunt.world.scenario import Scenario, ScenarioError, load_scenario
 
@@ -272,12 +277,11 @@ class AGVEnv(gym.Env[ObsType, ActType]):
     def _physics(self, speed: float, turn_rate: float) -> tuple[float, Outcome | None]:
         """One physics step; returns its risk and the outcome if it ends the episode."""
         dt = self.physics_step
-        if self._steps % self._control_every == 0:
-            self._control(self._steps * dt)
         robot_state = self._robot_state()
-        status = self.safety_layer.update(
-            robot_state, self._human_position, self.human_params.radius
-        )
+        if self._steps % self._control_every == 0:
+            self._control(self._steps * dt, robot_state)
+        human_radius = self.human_params.radius
+        status = self.safety_layer.update(robot_state, self._human_position, human_radius)
         if status.emergency_stop and not self._stopping:
             self._episode["estop_count"] += 1
         if self._stopping and not status.emergency_stop:
@@ -307,20 +311,24 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             turn_rate,
             dt,
             self.scenario.floor,
-            self.human_params.radius,
+            human_radius,
         )
         self._human_position, self._human_heading = human.position, human.heading
         self._human_velocity = human.velocity
         self._steps += 1
 
-        self._clearance = self._current_clearance()
-        contact = self._clearance <= 0.0
+        # The clearance of _current_clearance, from the human's place in the robot's frame,
+        # which also names the face of a contact.
         forward, left = to_body_frame(self._human_position, motion.x, motion.y, motion.heading)
-        face = rectangle_face(forward, left, self.robot_params.length, self.robot_params.width)
+        length, width = self.robot_params.length, self.robot_params.width
+        self._clearance = point_rectangle_clearance(forward, left, length, width) - human_radius
+        contact = self._clearance <= 0.0
+        face = rectangle_face(forward, left, length, width) if contact else ""
         verdict = judge_contact(
             contact, face, motion.speed, motion.heading, human.velocity, self.safety_spec
         )
-        human_speed = float(np.hypot(*human.velocity))
+        velocity_x, velocity_y = human.velocity.tolist()
+        human_speed = float(np.hypot(velocity_x, velocity_y))
         step_risk = risk(
             verdict is ContactVerdict.UNSAFE,
             contact,
@@ -330,7 +338,8 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             self.risk_params,
         )
         self._stop_steps = self._stop_steps + 1 if self._stopping else 0
-        goal_distance = math.hypot(motion.x - self.route.goal[0], motion.y - self.route.goal[1])
+        goal_x, goal_y = self.route.points[-1].tolist()
+        goal_distance = math.hypot(motion.x - goal_x, motion.y - goal_y)
         self._outcome = episode_outcome(
             verdict,
             goal_reached=goal_distance <= self.robot_params.goal_tolerance,
@@ -355,13 +364,13 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         episode["field_steps"] += int(status.human_in_field)
         return step_risk, self._outcome
 
-    def _control(self, now: float) -> None:
-        """One tracking and control instant."""
+    def _control(self, now: float, robot: RobotState) -> None:
+        """One tracking and control instant, with the robot's current state."""
         tracked = self.tracker.observe(now, self._human_position, self._human_heading)
         self._visible = tracked is not None
         if not self._stopping:
             try:
-                command = self.controller.control(now, self._robot_state(), tracked)
+                command = self.controller.control(now, robot, tracked)
             except Exception as error:
                 command = ControlCommand(
                     speed=0.0, yaw_rate=0.0, failed=True, status=f"raised {type(error).__name__}"

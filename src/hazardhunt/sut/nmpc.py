@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from bisect import bisect_right
 from dataclasses import dataclass, field
+from functools import cached_property
 from time import perf_counter
 from typing import Any, Literal
 
@@ -48,6 +50,9 @@ _OBSTACLE_SLACK, _KEEP_OUT_SLACK = 7, 8
 _BOUNDS = ("lbx", "ubx", "lbg", "ubg")
 _DISABLED_OFFSET = -1.0
 """Right-hand side of an unused obstacle slot: with a zero normal the row reads slack >= -1."""
+_BOX_MARGIN = 1e-6
+"""Growth of the obstacles' bounding boxes in the inside test, in m: far more than the rounding
+error of a ray's crossing with an edge."""
 
 
 @dataclass(frozen=True)
@@ -285,11 +290,11 @@ class NMPCController:
             return self._brake(robot, outcome, solve_time, predicted_human)
         self._previous = outcome.plan
         stages = outcome.plan.stages
+        speed, yaw_rate = stages[1, _SPEED : _YAW_RATE + 1].tolist()
+        max_yaw_rate = self.robot.max_yaw_rate
         return ControlCommand(
-            speed=float(np.clip(stages[1, _SPEED], 0.0, self.robot.max_speed)),
-            yaw_rate=float(
-                np.clip(stages[1, _YAW_RATE], -self.robot.max_yaw_rate, self.robot.max_yaw_rate)
-            ),
+            speed=min(max(speed, 0.0), self.robot.max_speed),
+            yaw_rate=min(max(yaw_rate, -max_yaw_rate), max_yaw_rate),
             status="ok",
             solve_time_s=solve_time,
             planned_positions=stages[:, :2].copy(),
@@ -321,15 +326,27 @@ class NMPCController:
         on_time = abs(time - self._previous_time - params.sample_time) < 0.5 * params.sample_time
         if previous is not None and on_time:
             plan = self._problem.shift(previous)
-            distance = math.hypot(robot.x - plan.stages[0, 0], robot.y - plan.stages[0, 1])
-            speed_error = abs(robot.speed - plan.stages[0, _SPEED])
+            x, y, heading, speed, _, acceleration, yaw_acceleration = plan.stages[
+                0, :_OBSTACLE_SLACK
+            ].tolist()
+            distance = math.hypot(robot.x - x, robot.y - y)
+            speed_error = abs(robot.speed - speed)
             if (
                 distance <= params.reinitialise_distance
                 and speed_error <= params.reinitialise_speed_error
             ):
-                heading = _unwrap(robot.heading, float(plan.stages[0, 2]))
-                plan.stages[0, :_STATE] = (robot.x, robot.y, heading, robot.speed, robot.yaw_rate)
-                plan.stages[0, _OBSTACLE_SLACK:] = 0.0
+                # The measured state, the planned accelerations and no slack.
+                plan.stages[0] = (
+                    robot.x,
+                    robot.y,
+                    _unwrap(robot.heading, heading),
+                    robot.speed,
+                    robot.yaw_rate,
+                    acceleration,
+                    yaw_acceleration,
+                    0.0,
+                    0.0,
+                )
                 return plan, True
         return self._rollout(robot), False
 
@@ -536,35 +553,29 @@ class _Problem:
     def parameters(
         self,
         measured: FloatArray,
-        reference: tuple[FloatArray, FloatArray, FloatArray],
+        reference: FloatArray,
         normals: FloatArray,
         offsets: FloatArray,
-        keep_out: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+        keep_out: FloatArray,
     ) -> FloatArray:
-        """The flat parameter vector.
+        """The flat parameter vector: the measured state, then stage by stage its table row.
 
         Args:
             measured: Shape (5,): the measured state.
-            reference: Reference points (N, 2), unit tangents (N, 2) and speeds (N,) of
-                stages 1..N.
+            reference: Shape (N, 5): from :func:`_reference`.
             normals: Shape (N, M, 2): unit normals of the obstacle half-planes.
             offsets: Shape (N, M): their right-hand sides, in m.
-            keep_out: From :func:`_keep_out`.
+            keep_out: Shape (N, 7): from :func:`_keep_out`.
         """
         horizon, slots = self.params.horizon, self.params.obstacle_slots
-        table = np.zeros((horizon, self.parameter_size))
-        points, tangents, speeds = reference
-        table[:, 0:2], table[:, 2:4], table[:, 4] = points, tangents, speeds
+        flat = np.empty(_STATE + horizon * self.parameter_size)
+        flat[:_STATE] = measured
+        table = flat[_STATE:].reshape(horizon, self.parameter_size)
+        table[:, :5] = reference
         table[:, 5 : 5 + 2 * slots] = normals.reshape(horizon, 2 * slots)
         table[:, 5 + 2 * slots : 5 + 3 * slots] = offsets
-        human, human_normal, exact_weight, linear_weight = keep_out
-        table[:, 5 + 3 * slots : 7 + 3 * slots] = human
-        table[:, 7 + 3 * slots : 9 + 3 * slots] = human_normal
-        table[:, 9 + 3 * slots], table[:, 10 + 3 * slots] = exact_weight, linear_weight
-        # Without a human the row reads slack + 1 >= 0: inactive, rather than a copy of the
-        # slack's own bound, which would leave two active constraints on one variable.
-        table[:, 11 + 3 * slots] = (exact_weight == 0.0) & (linear_weight == 0.0)
-        return np.concatenate([measured, table.ravel()])
+        table[:, 5 + 3 * slots :] = keep_out
+        return flat
 
     def solve(self, guess: _Plan, parameters: FloatArray, warm: bool) -> _Outcome:
         """Solve from ``guess`` with ``parameters`` (which hold the measured state).
@@ -614,16 +625,13 @@ class _Problem:
         self, x: FloatArray, cost: float, success: bool, status: object, iterations: float
     ) -> _Outcome:
         """The solver's flat solution and statistics as an outcome."""
-        flat = np.zeros((self.params.horizon + 1) * _STAGE)
-        flat[self.variable_index] = x
-        stages = flat.reshape(self.params.horizon + 1, _STAGE)
-        stages[-1, _ACCELERATIONS] = stages[-2, _ACCELERATIONS]
-        finite = bool(np.all(np.isfinite(stages)))
+        stages = x.take(self._stage_source).reshape(self.params.horizon + 1, _STAGE)
+        finite = bool(np.isfinite(x).all())
         extras = {
             "iterations": iterations,
             "cost": cost,
-            "keep_out_slack": float(np.max(stages[:, _KEEP_OUT_SLACK])),
-            "obstacle_slack": float(np.max(stages[:, _OBSTACLE_SLACK])),
+            "keep_out_slack": float(stages[:, _KEEP_OUT_SLACK].max()),
+            "obstacle_slack": float(stages[:, _OBSTACLE_SLACK].max()),
         }
         return _Outcome(
             success and finite,
@@ -632,11 +640,21 @@ class _Problem:
             extras,
         )
 
+    @cached_property
+    def _stage_source(self) -> NDArray[np.intp]:
+        """For each entry of the flattened stage table, its variable in the solver's order; stage
+        N, which has no accelerations, repeats stage N-1's."""
+        horizon = self.params.horizon
+        source = np.full((horizon + 1) * _STAGE, -1)
+        source[self.variable_index] = np.arange(len(self.variable_index))
+        table = source.reshape(horizon + 1, _STAGE)
+        table[-1, _ACCELERATIONS] = table[-2, _ACCELERATIONS]
+        return source
+
     def shift(self, plan: _Plan) -> _Plan:
         """The plan one stage later: stages move forward, the last one coasts for a stage."""
-        stages = np.empty_like(plan.stages)
-        stages[:-1], stages[-1] = plan.stages[1:], plan.stages[-1]
-        x, y, heading, speed, yaw_rate = stages[-1, :_STATE]
+        stages = np.concatenate([plan.stages[1:], plan.stages[-1:]])
+        x, y, heading, speed, yaw_rate = stages[-1, :_STATE].tolist()
         sample_time = self.params.sample_time
         stages[-1, :_STATE] = (
             x + speed * sample_time * math.cos(heading),
@@ -782,78 +800,105 @@ def _unwrap(angle: float, near: float) -> float:
 
 def _keep_out(
     predicted_human: FloatArray | None, stages: FloatArray, params: NMPCParams
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Keep-out parameters of stages 1..N: human positions (N, 2) in m, half-plane normals
-    (N, 2), and the weights of the exact (squared-distance) and linearised rows (N,).
+) -> FloatArray:
+    """Keep-out parameters of stages 1..N, shape (N, 7): per stage the human position (m), the
+    half-plane normal, the weights of the exact (squared-distance) and linearised rows, and the
+    relief (1 when no human is visible, else 0).
 
     At a stage where the guess already puts the robot inside the keep-out disc, the disc is
     replaced by its tangent half-plane facing the robot. Inside, the squared distance is
     concave with no gradient at the human's centre; with a human walking straight at a standing
     robot, the solver stalled there on the symmetric choice of dodging left or right. The linear
     row is scaled by 2 r so that both rows have the same slope at the disc's edge and the slack
-    the same units (m^2).
+    the same units (m^2). Without a human both weights are 0 and the row reads slack + 1 >= 0:
+    inactive, rather than a copy of the slack's own bound, which would leave two active
+    constraints on one variable.
     """
-    horizon = params.horizon
-    zeros = np.zeros(horizon)
+    table = np.zeros((params.horizon, 7))
     if predicted_human is None:
-        return np.zeros((horizon, 2)), np.zeros((horizon, 2)), zeros, zeros
+        table[:, 6] = 1.0
+        return table
     away = stages[1:, :2] - predicted_human
     distance = np.hypot(away[:, 0], away[:, 1])
-    # Where the guess sits on the human, face the robot's current position instead, and where
-    # that does too, the way the robot came from.
-    fallback = stages[0, :2] - predicted_human
-    fallback_distance = np.hypot(fallback[:, 0], fallback[:, 1])
-    heading = stages[0, 2]
-    backwards = np.array([-math.cos(heading), -math.sin(heading)])
-    normal = np.where(
-        (distance > 1e-6)[:, None],
-        away / np.maximum(distance, 1e-6)[:, None],
-        np.where(
-            (fallback_distance > 1e-6)[:, None],
-            fallback / np.maximum(fallback_distance, 1e-6)[:, None],
-            backwards,
-        ),
-    )
+    if (distance > 1e-6).all():
+        normal = away / distance[:, None]
+    else:
+        # Where the guess sits on the human, face the robot's current position instead, and
+        # where that does too, the way the robot came from.
+        fallback = stages[0, :2] - predicted_human
+        fallback_distance = np.hypot(fallback[:, 0], fallback[:, 1])
+        heading = stages[0, 2]
+        backwards = np.array([-math.cos(heading), -math.sin(heading)])
+        normal = np.where(
+            (distance > 1e-6)[:, None],
+            away / np.maximum(distance, 1e-6)[:, None],
+            np.where(
+                (fallback_distance > 1e-6)[:, None],
+                fallback / np.maximum(fallback_distance, 1e-6)[:, None],
+                backwards,
+            ),
+        )
     linear = distance < params.keep_out_radius
-    exact_weight = np.where(linear, 0.0, 1.0)
-    linear_weight = np.where(linear, 2.0 * params.keep_out_radius, 0.0)
-    return predicted_human, normal, exact_weight, linear_weight
+    table[:, 0:2] = predicted_human
+    table[:, 2:4] = normal
+    table[:, 4] = ~linear
+    table[:, 5] = linear * (2.0 * params.keep_out_radius)
+    return table
 
 
-def _reference(
-    route: Route, progress: float, params: NMPCParams
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _reference(route: Route, progress: float, params: NMPCParams) -> FloatArray:
     """Reference points, unit tangents and speeds of stages 1..N.
 
     The reference moves along the route from ``progress`` at the reference speed and brakes at
     the goal deceleration so that it stops at the route's end.
 
     Returns:
-        Points (N, 2) in m, tangents (N, 2), speeds (N,) in m/s.
+        Shape (N, 5): per stage the point (m), the route's unit tangent there and the speed
+        (m/s).
     """
     cruise, deceleration = params.speed_reference, params.goal_deceleration
-    remaining = max(route.length - progress, 0.0)
+    length = route.length
+    remaining = max(length - progress, 0.0)
     braking_distance = cruise * cruise / (2.0 * deceleration)
     if remaining >= braking_distance:
         stop_time = remaining / cruise + cruise / (2.0 * deceleration)
     else:
         stop_time = math.sqrt(2.0 * remaining / deceleration)
     braking_start = stop_time - cruise / deceleration
-    elapsed = params.sample_time * np.arange(1, params.horizon + 1)
-    to_stop = np.maximum(stop_time - elapsed, 0.0)
-    left = np.where(
-        elapsed <= braking_start,
-        cruise * (braking_start - elapsed) + braking_distance,
-        0.5 * deceleration * to_stop**2,
-    )
-    arc_length = route.length - left
-    speeds = np.minimum(cruise, deceleration * to_stop)
-    segment = np.clip(np.searchsorted(route.cumulative, arc_length, side="right") - 1, 0, None)
-    segment = np.minimum(segment, len(route.points) - 2)
-    direction = route.points[segment + 1] - route.points[segment]
-    tangents = direction / np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-12)[:, None]
-    points = route.points[segment] + (arc_length - route.cumulative[segment])[:, None] * tangents
-    return points, tangents, speeds
+    points, cumulative = route.points.tolist(), route.cumulative.tolist()
+    last_segment = len(points) - 2
+    half_deceleration, sample_time = 0.5 * deceleration, params.sample_time
+    segment = -1
+    start_x = start_y = start_s = tangent_x = tangent_y = 0.0
+    rows: list[float] = []
+    for stage in range(1, params.horizon + 1):
+        elapsed = sample_time * stage
+        to_stop = stop_time - elapsed
+        if to_stop < 0.0:
+            to_stop = 0.0
+        if elapsed <= braking_start:
+            arc_length = length - (cruise * (braking_start - elapsed) + braking_distance)
+        else:
+            arc_length = length - half_deceleration * (to_stop * to_stop)
+        index = bisect_right(cumulative, arc_length) - 1
+        index = 0 if index < 0 else last_segment if index > last_segment else index
+        if index != segment:
+            segment = index
+            (start_x, start_y), (end_x, end_y) = points[segment], points[segment + 1]
+            dx, dy = end_x - start_x, end_y - start_y
+            norm = max(float(np.hypot(dx, dy)), 1e-12)
+            tangent_x, tangent_y = dx / norm, dy / norm
+            start_s = cumulative[segment]
+        along = arc_length - start_s
+        speed = deceleration * to_stop
+        rows += (
+            start_x + along * tangent_x,
+            start_y + along * tangent_y,
+            tangent_x,
+            tangent_y,
+            cruise if cruise <= speed else speed,
+        )
+    return np.array(rows).reshape(-1, 5)
 
 
 class _Obstacles:
@@ -861,7 +906,8 @@ class _Obstacles:
 
     Every polygon is padded to the same number of edges K with zero-length edges at its first
     vertex: they never straddle a ray and their nearest point is a vertex, so they change neither
-    the inside test nor the distance.
+    the inside test nor the distance. Per-edge arrays stack x over y where both are needed, so
+    that one numpy operation treats both coordinates.
     """
 
     def __init__(self, floor: FloorMap) -> None:
@@ -879,6 +925,10 @@ class _Obstacles:
         self.start_x, self.start_y = starts[:, 0], starts[:, 1]
         self.end_y = ends[:, 1]
         self.delta_x, self.delta_y = (ends - starts).T
+        self.starts = np.ascontiguousarray(starts.T)[:, None, :]
+        """Shape (2, 1, E): the edges' start points, x row over y row, in m."""
+        self.deltas = np.ascontiguousarray((ends - starts).T)[:, None, :]
+        """Shape (2, 1, E): the edges' vectors from start to end, in m."""
         length_sq = self.delta_x**2 + self.delta_y**2
         degenerate = length_sq == 0.0
         self.inverse_length_sq = np.where(
@@ -887,13 +937,39 @@ class _Obstacles:
         length = np.sqrt(length_sq)
         # Vertices run counter-clockwise: the outward normal is the edge direction turned right.
         safe_length = np.where(degenerate, 1.0, length)
-        self.outward_x = np.where(degenerate, 0.0, self.delta_y / safe_length)
-        self.outward_y = np.where(degenerate, 0.0, -self.delta_x / safe_length)
+        self.outward = np.stack(
+            [
+                np.where(degenerate, 0.0, self.delta_y / safe_length),
+                np.where(degenerate, 0.0, -self.delta_x / safe_length),
+            ]
+        )
+        """Shape (2, E): the edges' unit outward normals (zero for padding edges)."""
         self.slope = np.where(
             self.delta_y != 0.0,
             self.delta_x / np.where(self.delta_y != 0.0, self.delta_y, 1.0),
             0.0,
         )
+        low = np.array([p.min(axis=0) for p in polygons]).reshape(-1, 2)
+        high = np.array([p.max(axis=0) for p in polygons]).reshape(-1, 2)
+        self.box_low = (low.T - _BOX_MARGIN)[:, None, :]
+        """Shape (2, 1, C): each obstacle's bounding box's lower x and y less a margin, in m."""
+        self.box_high = (high.T + _BOX_MARGIN)[:, None, :]
+        """Shape (2, 1, C): each obstacle's bounding box's upper x and y plus a margin, in m."""
+        self._first_edges: dict[int, tuple[NDArray[np.intp], NDArray[np.intp]]] = {}
+
+    def _offsets(self, count: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Index offsets for ``count`` points: of each obstacle's first edge in the flattened
+        (points, edges) arrays, shape (count, obstacles), and of each point's row in the
+        flattened (points, obstacles) arrays, shape (count, 1)."""
+        offsets = self._first_edges.get(count)
+        if offsets is None:
+            edges = self.count * self.edges_per_obstacle
+            first_edge = np.arange(count)[:, None] * edges + self.edges_per_obstacle * np.arange(
+                self.count
+            )
+            offsets = first_edge, np.arange(count)[:, None] * self.count
+            self._first_edges[count] = offsets
+        return offsets
 
     def half_planes(
         self, points: FloatArray, inflation: float, slots: int
@@ -914,37 +990,51 @@ class _Obstacles:
             Normals (N, M, 2) and offsets (N, M), in m.
         """
         count = len(points)
-        normals = np.zeros((count, slots, 2))
-        offsets = np.full((count, slots), _DISABLED_OFFSET)
-        if self.count == 0 or slots == 0:
-            return normals, offsets
-        px, py = points[:, :1], points[:, 1:]
-        to_x, to_y = px - self.start_x, py - self.start_y
-        along = (to_x * self.delta_x + to_y * self.delta_y) * self.inverse_length_sq
-        np.clip(along, 0.0, 1.0, out=along)
-        gap_x = to_x - along * self.delta_x
-        gap_y = to_y - along * self.delta_y
-        distance_sq = gap_x**2 + gap_y**2
-        shape = (count, self.count, self.edges_per_obstacle)
-        nearest_edge = np.argmin(distance_sq.reshape(shape), axis=2)
-        edge = nearest_edge + self.edges_per_obstacle * np.arange(self.count)
-        rows = np.arange(count)[:, None]
-        gap_x, gap_y = gap_x[rows, edge], gap_y[rows, edge]
-        distance = np.sqrt(distance_sq[rows, edge])
-        # Even-odd rule on a ray towards +x: inside points get the normal flipped outwards.
-        straddles = (self.start_y > py) != (self.end_y > py)
-        crossing = self.start_x + (py - self.start_y) * self.slope
-        crossings = (straddles & (px < crossing)).reshape(shape).sum(axis=2)
-        sign = np.where(crossings % 2 == 1, -1.0, 1.0)
+        used = min(slots, self.count)
+        if used == 0:
+            return np.zeros((count, slots, 2)), np.full((count, slots), _DISABLED_OFFSET)
+        point = points.T[:, :, None]  # (2, N, 1)
+        px, py = point[0], point[1]
+        # Nearest point of every edge: (2, N, E) arrays hold the x and y parts.
+        to = point - self.starts
+        products = to * self.deltas
+        along = products[0] + products[1]
+        along *= self.inverse_length_sq
+        np.minimum(np.maximum(along, 0.0, out=along), 1.0, out=along)
+        gap = to - along * self.deltas
+        squares = gap * gap
+        distance_sq = squares[0] + squares[1]
+        first_edge, first_obstacle = self._offsets(count)
+        # Per point and obstacle its nearest edge, as an index into the flattened (N, E) arrays.
+        nearest = distance_sq.reshape(count, self.count, -1).argmin(axis=2) + first_edge
+        distance = np.sqrt(distance_sq.take(nearest))
+        chosen = np.argsort(distance, axis=1)[:, :slots] + first_obstacle
+        edge = nearest.take(chosen)
+        distance = distance.take(chosen)
+        gap = gap.reshape(2, -1).take(edge, axis=1)
+        # Even-odd rule on a ray towards +x: inside points get the normal flipped outwards. A
+        # point outside an obstacle's (slightly grown) bounding box crosses its boundary an even
+        # number of times, so the rule only runs when some point lies within a box.
+        sign: FloatArray | float = 1.0
+        in_box = (point > self.box_low) & (point < self.box_high)
+        if (in_box[0] & in_box[1]).any():
+            straddles = (self.start_y > py) != (self.end_y > py)
+            hits = straddles & (px < self.start_x + to[1] * self.slope)
+            crossings = hits.reshape(count, self.count, -1).sum(axis=2)
+            sign = np.where(crossings.take(chosen) % 2 == 1, -1.0, 1.0)
         apart = distance > 1e-9
-        scale = np.where(apart, sign / np.where(apart, distance, 1.0), 0.0)
-        normal_x = np.where(apart, gap_x * scale, self.outward_x[edge])
-        normal_y = np.where(apart, gap_y * scale, self.outward_y[edge])
-        chosen = np.argsort(distance, axis=1)[:, :slots]
-        used = chosen.shape[1]
-        normal_x, normal_y = normal_x[rows, chosen], normal_y[rows, chosen]
-        nearest_x = px - gap_x[rows, chosen]
-        nearest_y = py - gap_y[rows, chosen]
-        normals[:, :used, 0], normals[:, :used, 1] = normal_x, normal_y
-        offsets[:, :used] = normal_x * nearest_x + normal_y * nearest_y + inflation
+        if apart.all():
+            normal = gap * (sign / distance)  # (2, N, used)
+        else:
+            # On the boundary the gap has no direction: take the edge's outward normal.
+            scale = np.where(apart, sign / np.where(apart, distance, 1.0), 0.0)
+            outward = self.outward.take(edge % self.outward.shape[1], axis=1)
+            normal = np.where(apart, gap * scale, outward)
+        along_normal = normal * (point - gap)  # the nearest points' parts along the normals
+        offsets = along_normal[0] + along_normal[1] + inflation
+        normals = normal.transpose(1, 2, 0)
+        if used < slots:
+            normals = np.concatenate([normals, np.zeros((count, slots - used, 2))], axis=1)
+            disabled = np.full((count, slots - used), _DISABLED_OFFSET)
+            offsets = np.concatenate([offsets, disabled], axis=1)
         return normals, offsets

@@ -1,7 +1,7 @@
 """Prediction of the human's future positions from its last tracked positions (SPEC 3).
 
-The NMPC calls this once per control period (every 0.2 s), so it is plain numpy with no Python
-loop over the horizon.
+The NMPC calls this once per control period (every 0.2 s) for a horizon of about twenty
+instants: too few for numpy to pay off, so the arithmetic runs on Python floats.
 """
 
 from __future__ import annotations
@@ -39,42 +39,70 @@ def predict_constant_acceleration(
         Shape (horizon, 2): the predicted positions at ``t + step, ..., t + horizon * step``,
         where t is the latest tracking instant, in m.
     """
-    positions = np.asarray(recent_positions, dtype=np.float64).reshape(-1, 2)[-3:]
-    times = np.asarray(recent_times, dtype=np.float64).reshape(-1)[-3:]
+    positions = np.asarray(recent_positions, dtype=np.float64).reshape(-1, 2)[-3:].tolist()
+    times = np.asarray(recent_times, dtype=np.float64).reshape(-1)[-3:].tolist()
     if len(positions) == 0 or len(positions) != len(times):
         raise ValueError("recent_positions and recent_times must hold the same k >= 1 instants")
-    velocity, acceleration = _velocity_and_acceleration(positions, times)
+    (velocity_x, velocity_y), (acceleration_x, acceleration_y) = _velocity_and_acceleration(
+        positions, times
+    )
     if horizon <= 0:
         return np.zeros((0, 2))
-    elapsed = step * np.arange(horizon + 1, dtype=np.float64)
-    uncapped = velocity + elapsed[:, None] * acceleration
-    speed = np.hypot(uncapped[:, 0], uncapped[:, 1])
-    capped = uncapped * np.minimum(1.0, max_speed / np.maximum(speed, 1e-12))[:, None]
-    displacements = 0.5 * step * (capped[:-1] + capped[1:])
-    predicted: FloatArray = positions[-1] + np.cumsum(displacements, axis=0)
-    return predicted
+    elapsed = [step * index for index in range(horizon + 1)]
+    uncapped_x = [velocity_x + e * acceleration_x for e in elapsed]
+    uncapped_y = [velocity_y + e * acceleration_y for e in elapsed]
+    capped = list(zip(uncapped_x, uncapped_y, strict=True))
+    # Below 99 % of the squared cap no rounding brings the speed up to the cap.
+    below_cap = 0.99 * max_speed * max_speed if max_speed >= 1e-6 else -1.0
+    if not all(vx * vx + vy * vy <= below_cap for vx, vy in capped):
+        speeds = np.hypot(uncapped_x, uncapped_y).tolist()
+        for index, speed in enumerate(speeds):
+            # min(1, max_speed / max(speed, 1e-12)), passing NaN on.
+            ratio = max_speed / (1e-12 if speed < 1e-12 else speed)
+            factor = 1.0 if ratio >= 1.0 else ratio
+            capped[index] = (uncapped_x[index] * factor, uncapped_y[index] * factor)
+    # Trapezoidal rule: each step moves by the mean of its two capped velocities.
+    half_step = 0.5 * step
+    x, y = positions[-1]
+    predicted: list[float] = []
+    shift_x = shift_y = 0.0
+    for index in range(horizon):
+        (start_x, start_y), (end_x, end_y) = capped[index], capped[index + 1]
+        step_x, step_y = half_step * (start_x + end_x), half_step * (start_y + end_y)
+        if index == 0:
+            shift_x, shift_y = step_x, step_y
+        else:
+            shift_x, shift_y = shift_x + step_x, shift_y + step_y
+        predicted += (x + shift_x, y + shift_y)
+    return np.array(predicted).reshape(-1, 2)
 
 
 def _velocity_and_acceleration(
-    positions: FloatArray, times: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+    positions: list[list[float]], times: list[float]
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """Velocity (m/s) and acceleration (m/s^2) at the latest instant from up to three points."""
-    intervals = np.diff(times)
     # A repeated or reordered tracking instant carries no motion information: use the longest
     # trailing run of increasing instants.
     usable = len(times)
-    for index in range(len(intervals) - 1, -1, -1):
-        if not intervals[index] > 0.0:
-            usable = len(intervals) - index
+    for index in range(len(times) - 2, -1, -1):
+        if not times[index + 1] - times[index] > 0.0:
+            usable = len(times) - 1 - index
             break
     positions, times = positions[-usable:], times[-usable:]
-    zero = np.zeros(2)
     if len(positions) == 1:
-        return zero, zero
-    quotients = np.diff(positions, axis=0) / np.diff(times)[:, None]
+        return (0.0, 0.0), (0.0, 0.0)
+    quotients = [
+        ((x1 - x0) / (t1 - t0), (y1 - y0) / (t1 - t0))
+        for (x0, y0), (x1, y1), t0, t1 in zip(
+            positions[:-1], positions[1:], times[:-1], times[1:], strict=False
+        )
+    ]
     if len(positions) == 2:
-        return quotients[-1], zero
+        return quotients[-1], (0.0, 0.0)
     # Divided differences of the interpolating quadratic: exact for constant acceleration.
-    acceleration = 2.0 * (quotients[1] - quotients[0]) / (times[2] - times[0])
-    velocity = quotients[1] + 0.5 * acceleration * (times[2] - times[1])
-    return velocity, acceleration
+    (first_x, first_y), (second_x, second_y) = quotients
+    span, last = times[2] - times[0], times[2] - times[1]
+    acceleration_x = 2.0 * (second_x - first_x) / span
+    acceleration_y = 2.0 * (second_y - first_y) / span
+    velocity = (second_x + 0.5 * acceleration_x * last, second_y + 0.5 * acceleration_y * last)
+    return velocity, (acceleration_x, acceleration_y)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, field
 
 import networkx as nx
@@ -69,16 +70,28 @@ class Route:
     def project(self, point: FloatArray, s_min: float = 0.0, s_max: float = math.inf) -> float:
         """Arc length of the route point nearest to ``point``, searched within [s_min, s_max]."""
         best_s, best_distance = s_min, math.inf
-        for index in range(len(self.points) - 1):
-            start_s, end_s = self.cumulative[index], self.cumulative[index + 1]
+        cumulative = self.cumulative.tolist()
+        last_segment = len(cumulative) - 2
+        x, y = float(point[0]), float(point[1])
+        for index in range(last_segment + 1):
+            start_s, end_s = cumulative[index], cumulative[index + 1]
             if end_s < s_min or start_s > s_max:
                 continue
             start = self.points[index]
             direction = self.points[index + 1] - start
             length = end_s - start_s
             t = float(np.dot(point - start, direction)) / max(length * length, 1e-12)
-            s = float(np.clip(start_s + t * length, max(start_s, s_min), min(end_s, s_max)))
-            distance = float(np.hypot(*(self.point_at(s) - point)))
+            s = min(max(start_s + t * length, max(start_s, s_min)), min(end_s, s_max))
+            # The distance to point_at(s), whose segment is the one holding s.
+            segment = bisect_right(cumulative, s) - 1
+            segment = 0 if segment < 0 else last_segment if segment > last_segment else segment
+            (start_x, start_y), (end_x, end_y) = self.points[segment : segment + 2].tolist()
+            dx, dy = end_x - start_x, end_y - start_y
+            norm = max(float(np.hypot(dx, dy)), 1e-12)
+            along = s - cumulative[segment]
+            distance = float(
+                np.hypot(start_x + along * (dx / norm) - x, start_y + along * (dy / norm) - y)
+            )
             if distance < best_distance:
                 best_s, best_distance = s, distance
         return best_s

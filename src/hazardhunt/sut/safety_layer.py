@@ -17,6 +17,14 @@ FIELD_SETTINGS: dict[str, float | None] = {"none": None, "1.25m": 1.25, "2m": 2.
 """The named field settings and their protective-field diameters, in m (None: no field)."""
 
 
+_STATUSES = {
+    (stop, in_field): SafetyStatus(emergency_stop=stop, human_in_field=in_field)
+    for stop in (False, True)
+    for in_field in (False, True)
+}
+"""The four possible verdicts, built once: the layer answers at every physics step."""
+
+
 def field_diameter(setting: str) -> float | None:
     """The protective-field diameter of a named setting, in m.
 
@@ -59,4 +67,4 @@ class LaserSafetyLayer:
             self._stopping = True
         elif self._stopping and robot.speed <= self.standstill_speed:
             self._stopping = False
-        return SafetyStatus(emergency_stop=self._stopping, human_in_field=in_field)
+        return _STATUSES[self._stopping, in_field]

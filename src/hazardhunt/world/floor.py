@@ -11,7 +11,6 @@ from numpy.typing import NDArray
 from hazardhunt.world.geometry import (
     FloatArray,
     distances_to_segments,
-    nearest_points_on_segments,
     point_in_polygon,
     polygon_edges,
 )
@@ -53,6 +52,11 @@ class FloorMap:
     )
     """Per obstacle its edges as (start x, start y, end x, end y), Python floats for scalar
     queries."""
+    _segments: tuple[tuple[tuple[int, float, float, float, float, float], ...], ...] = field(
+        init=False, repr=False, compare=False
+    )
+    """Per obstacle its edges as (index into ``edges``, start x, start y, direction x, direction
+    y, squared length or 1 for a zero-length edge), Python floats for scalar queries."""
 
     def __post_init__(self) -> None:
         polygons = [o.polygon for o in self.obstacles]
@@ -74,6 +78,19 @@ class FloorMap:
             for p in polygons
         )
         object.__setattr__(self, "_edge_lists", edge_lists)
+        start = self.edges[:, 0, :]
+        direction = self.edges[:, 1, :] - start
+        length_sq = np.einsum("ij,ij->i", direction, direction)
+        rows = np.column_stack([start, direction, np.where(length_sq > 0, length_sq, 1.0)])
+        rows_list = rows.tolist()
+        segments = tuple(
+            tuple(
+                (index, *rows_list[index])
+                for index in np.flatnonzero(self.edge_owner == owner).tolist()
+            )
+            for owner in range(len(self.obstacles))
+        )
+        object.__setattr__(self, "_segments", segments)
 
     def inside_obstacle(self, point: FloatArray) -> bool:
         """Whether a point lies strictly inside any obstacle (even-odd rule, all at once)."""
@@ -109,23 +126,64 @@ class FloorMap:
         return -distance if self.inside_obstacle(point) else distance
 
     def nearest_obstacle_point(self, point: FloatArray) -> FloatArray:
-        """The point on any obstacle boundary nearest to ``point``."""
-        nearest = nearest_points_on_segments(point, self.edges)
-        index = int(np.argmin(np.hypot(*(nearest - point).T)))
-        return np.asarray(nearest[index], dtype=np.float64)
+        """The point on any obstacle boundary nearest to ``point``.
+
+        The arithmetic of :func:`~hazardhunt.world.geometry.nearest_points_on_segments` on
+        Python floats, for the edges of the obstacles whose bounding boxes are near enough to
+        hold the nearest point; among edges at the same distance the first one wins.
+        """
+        if len(self.edges) == 0:
+            raise ValueError("the floor has no obstacles")
+        x, y = float(point[0]), float(point[1])
+        by_box = []
+        for index, (x_min, y_min, x_max, y_max) in enumerate(self.bounding_boxes):
+            dx = x_min - x if x < x_min else x - x_max if x > x_max else 0.0
+            dy = y_min - y if y < y_min else y - y_max if y > y_max else 0.0
+            by_box.append((dx * dx + dy * dy, index))
+        by_box.sort()
+        # Distances are compared with a margin far above their rounding error (in m, relative
+        # to the coordinates); the edges within it of the nearest are compared exactly below.
+        margin = 1e-9 * (1.0 + abs(x) + abs(y))
+        best = math.inf
+        candidates: list[tuple[int, float, float, float]] = []
+        for box_distance_sq, owner in by_box:
+            if box_distance_sq > (best + margin) ** 2:
+                break
+            for index, start_x, start_y, dx, dy, length_sq in self._segments[owner]:
+                offset_x, offset_y = x - start_x, y - start_y
+                t = (offset_x * dx + offset_y * dy) / length_sq
+                t = min(max(t, 0.0), 1.0)
+                nearest_x, nearest_y = start_x + t * dx, start_y + t * dy
+                gap_x, gap_y = nearest_x - x, nearest_y - y
+                distance = math.sqrt(gap_x * gap_x + gap_y * gap_y)
+                if distance <= best + margin:
+                    candidates.append((index, nearest_x, nearest_y, distance))
+                    best = min(best, distance)
+        nearest = [c for c in candidates if c[3] <= best + margin]
+        if len(nearest) > 1:
+            nearest.sort()
+            gaps = np.array([(c[1] - x, c[2] - y) for c in nearest])
+            nearest = [nearest[int(np.argmin(np.hypot(gaps[:, 0], gaps[:, 1])))]]
+        return np.array(nearest[0][1:3])
 
     def disc_blocked(self, center: FloatArray, radius: float) -> bool:
         """Whether a disc overlaps an obstacle or leaves the floor."""
-        if not self.on_floor(center, radius):
+        return self.disc_blocked_at(float(center[0]), float(center[1]), radius)
+
+    def disc_blocked_at(self, x: float, y: float, radius: float) -> bool:
+        """Whether a disc centred at (x, y) overlaps an obstacle or leaves the floor."""
+        if not (radius <= x <= self.width - radius and radius <= y <= self.height - radius):
             return True
-        x, y = float(center[0]), float(center[1])
         limit = radius * radius
-        for box, edges in zip(self.bounding_boxes, self._edge_lists, strict=True):
-            x_min, y_min, x_max, y_max = box
-            dx = max(x_min - x, 0.0, x - x_max)
-            dy = max(y_min - y, 0.0, y - y_max)
+        for (x_min, y_min, x_max, y_max), edges in zip(
+            self.bounding_boxes, self._edge_lists, strict=True
+        ):
             # A disc at least ``radius`` from an obstacle's bounding box is at least that far
             # from the obstacle and outside it: most queries end here.
+            dx = x_min - x if x < x_min else x - x_max if x > x_max else 0.0
+            if dx >= radius:
+                continue
+            dy = y_min - y if y < y_min else y - y_max if y > y_max else 0.0
             if dx * dx + dy * dy < limit and _disc_meets_polygon(x, y, radius, edges):
                 return True
         return False

@@ -42,10 +42,13 @@ def step_human(
     """
     new_heading = heading + turn_rate * dt
     mid_heading = heading + 0.5 * turn_rate * dt
-    step = speed * dt * np.array([math.cos(mid_heading), math.sin(mid_heading)])
-    target = position + step
-    if not floor.disc_blocked(target, radius):
-        return HumanMotion(target, new_heading, step / dt, False)
+    distance = speed * dt
+    step_x, step_y = distance * math.cos(mid_heading), distance * math.sin(mid_heading)
+    target_x, target_y = float(position[0]) + step_x, float(position[1]) + step_y
+    if not floor.disc_blocked_at(target_x, target_y, radius):
+        velocity = np.array([step_x / dt, step_y / dt])
+        return HumanMotion(np.array([target_x, target_y]), new_heading, velocity, False)
+    step = np.array([step_x, step_y])
     nearest = floor.nearest_obstacle_point(position)
     away = position - nearest
     norm = float(np.hypot(*away))
