@@ -13,13 +13,16 @@ WALL_CLOCK_COLUMNS = ["wall_time_s", "solve_time_mean_s", "solve_time_median_s",
 """Columns of episodes.parquet that measure wall-clock time and so differ between runs."""
 
 
-def hazardhunt(*args: object, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-    """The ``hazardhunt`` command, as a user runs it."""
+def hazardhunt(
+    *args: object, timeout: float = 300, cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    """The ``hazardhunt`` command, as a user runs it (in ``cwd``, default the current one)."""
     return subprocess.run(
         [sys.executable, "-m", "hazardhunt.cli", *map(str, args)],
         capture_output=True,
         text=True,
         timeout=timeout,
+        cwd=cwd,
         # rich wraps at 80 columns when not on a terminal; errors must stay one line.
         env=os.environ | {"COLUMNS": "1000"},
         check=False,

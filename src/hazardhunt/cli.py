@@ -6,7 +6,7 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -21,6 +21,9 @@ from rich.progress import Progress
 from rich.table import Table
 
 from hazardhunt.campaign.config import ConfigError
+
+if TYPE_CHECKING:
+    from hazardhunt.campaign.config import PluginSpec
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
@@ -89,6 +92,28 @@ def scenarios(
     console.print(f"Pictures written to [bold]{out.resolve()}[/bold]")
 
 
+ControllerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Your controller as package.module:Class, instead of the built-in NMPC (or, for "
+        "regress, of the case's own)."
+    ),
+]
+ControllerParamOption = Annotated[
+    list[str] | None, typer.Option(help="A controller parameter as KEY=VALUE; repeatable.")
+]
+SafetyLayerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Your safety layer as package.module:Class, instead of the laser field (or, for "
+        "regress, of the case's own)."
+    ),
+]
+SafetyLayerParamOption = Annotated[
+    list[str] | None, typer.Option(help="A safety-layer parameter as KEY=VALUE; repeatable.")
+]
+
+
 @app.command("run")
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
@@ -106,6 +131,10 @@ def run_command(
             "repeat for several."
         ),
     ] = None,
+    controller: ControllerOption = None,
+    controller_param: ControllerParamOption = None,
+    safety_layer: SafetyLayerOption = None,
+    safety_layer_param: SafetyLayerParamOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
@@ -122,7 +151,9 @@ def run_command(
             seed=seed,
             episodes=episodes,
             env=EnvOptions(decision_period=decision_period, solver=solver),
-            tester_params=_tester_params(tester_param or []),
+            tester_params=_assignments("--tester-param", tester_param),
+            controller=_plugin("--controller", controller, controller_param),
+            safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
         )
     )
     summary = run_into(config, out, console=err_console)
@@ -132,18 +163,34 @@ def run_command(
         _print_run_summary(summary, out)
 
 
-def _tester_params(assignments: list[str]) -> dict[str, Any]:
+def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
     """``KEY=VALUE`` strings as a dict; VALUE is read as TOML, and as a string if it is none."""
     params: dict[str, Any] = {}
-    for assignment in assignments:
+    for assignment in assignments or []:
         key, separator, value = assignment.partition("=")
         if not separator or not key.strip():
-            raise ConfigError(f"--tester-param: {assignment!r} is not KEY=VALUE")
+            raise ConfigError(f"{option}: {assignment!r} is not KEY=VALUE")
         try:
             params[key.strip()] = tomllib.loads(f"value = {value}")["value"]
         except tomllib.TOMLDecodeError:
             params[key.strip()] = value
     return params
+
+
+def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSpec | None:
+    """A plug-in's specification from the command line; its module may sit in the working
+    directory."""
+    from hazardhunt.campaign.config import PluginSpec
+
+    if path is None:
+        if params:
+            raise ConfigError(f"{option}-param: given without {option}")
+        return None
+    return PluginSpec(
+        path=path,
+        params=_assignments(f"{option}-param", params),
+        search_path=[str(Path.cwd())],
+    )
 
 
 @app.command()
@@ -219,6 +266,81 @@ def report(
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
 
 
+@app.command()
+def export(
+    directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
+    out: Annotated[Path, typer.Option(help="Folder for the case files (created).")],
+    all_failures: Annotated[
+        bool,
+        typer.Option("--all", help="One case per failure, not one per class, scenario and field."),
+    ] = False,
+    pytest_module: Annotated[
+        bool,
+        typer.Option(
+            "--pytest", help="Also write test_hazardhunt_cases.py: the cases as pytest tests."
+        ),
+    ] = False,
+) -> None:
+    """Write failures as self-contained regression cases (TOML), to re-run with regress."""
+    from hazardhunt.campaign.cases import export_cases, write_pytest_module
+
+    written = export_cases(directory, out, every_failure=all_failures)
+    console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
+    if not written:
+        console.print("the results hold no failure")
+    if pytest_module:
+        console.print(f"pytest module written to [bold]{write_pytest_module(out)}[/bold]")
+
+
+@app.command()
+def regress(
+    cases: Annotated[Path, typer.Argument(help="A case file or a folder of case files.")],
+    controller: ControllerOption = None,
+    controller_param: ControllerParamOption = None,
+    safety_layer: SafetyLayerOption = None,
+    safety_layer_param: SafetyLayerParamOption = None,
+    field: Annotated[
+        str | None, typer.Option(help="Re-run with this field setting instead of the case's.")
+    ] = None,
+    json_output: Annotated[
+        bool, typer.Option("--json", help="Print the results as JSON on stdout.")
+    ] = False,
+) -> None:
+    """Re-run regression cases: each still fails, changed (fails differently) or is fixed.
+
+    Exits with code 1 while any case still fails or changed, so that it can gate a CI job.
+    """
+    from hazardhunt.campaign.cases import case_files, regress_case
+
+    controller_spec = _plugin("--controller", controller, controller_param)
+    safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
+    files = case_files(cases)
+    results = []
+    with Progress(console=err_console, transient=True) as progress:
+        task = progress.add_task("re-running cases", total=len(files))
+        for path in files:
+            results.append(
+                regress_case(
+                    path, controller=controller_spec, safety_layer=safety_spec, field=field
+                )
+            )
+            progress.advance(task)
+    counts = {v: sum(r.verdict == v for r in results) for v in ("still fails", "changed", "fixed")}
+    if json_output:
+        print(json.dumps({"cases": [vars(r) for r in results], "counts": counts}))
+    else:
+        colours = {"still fails": "red", "changed": "yellow", "fixed": "green"}
+        table = Table("case", "expected", "now", "at (s)", "verdict")
+        for r in results:
+            now = r.failure_class if r.failure_class is not None else r.outcome
+            verdict = f"[{colours[r.verdict]}]{r.verdict}[/{colours[r.verdict]}]"
+            table.add_row(r.case, r.expected_class, now, f"{r.sim_time:.2f}", verdict)
+        console.print(table)
+        console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
+    if counts["still fails"] or counts["changed"]:
+        raise typer.Exit(1)
+
+
 def _validated(build: Callable[[], T]) -> T:
     from pydantic import ValidationError
 
@@ -247,11 +369,13 @@ def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
 def run() -> None:
     """Entry point that turns input errors into one clear line on stderr and exit code 2."""
     from hazardhunt.analysis.results import ResultsError
+    from hazardhunt.campaign.cases import CaseError
     from hazardhunt.campaign.replay import ReplayError
+    from hazardhunt.sut.plugins import PluginError
 
     try:
         app()
-    except (ScenarioError, ConfigError, ReplayError, ResultsError) as error:
+    except (ScenarioError, ConfigError, ReplayError, ResultsError, CaseError, PluginError) as error:
         err_console.print(f"[red]error:[/red] {escape(str(error))}")
         raise SystemExit(2) from None
 

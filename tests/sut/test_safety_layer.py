@@ -55,3 +55,30 @@ def test_no_field_never_stops():
 def test_unknown_setting_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown field setting '3m'"):
         field_diameter("3m")
+
+
+def test_side_bands_cover_the_robots_sides_up_to_their_width():
+    layer = LaserSafetyLayer(1.25, side_margin=0.4)
+    reach = 0.25 + 0.4 + 0.25  # half the width, the band, the human's radius
+    for side in (1.0, -1.0):
+        assert layer.human_in_field(ROBOT, np.array([0.0, side * (reach - 0.01)]), 0.25)
+        assert not layer.human_in_field(ROBOT, np.array([0.0, side * (reach + 0.01)]), 0.25)
+    # Along the whole body, from the rear face to the front face, and no further back.
+    assert layer.human_in_field(ROBOT, np.array([-0.3, 0.6]), 0.25)
+    assert not layer.human_in_field(ROBOT, np.array([-0.32 - 0.26, 0.6]), 0.25)
+    # The front field is unchanged.
+    assert layer.human_in_field(ROBOT, np.array([0.32 + 0.625 + 0.24, 0.0]), 0.25)
+
+
+def test_without_side_bands_the_layer_is_the_studys():
+    rng = np.random.default_rng(0)
+    study, banded = LaserSafetyLayer(1.25), LaserSafetyLayer(1.25, side_margin=0.0)
+    for point in rng.uniform(-2.0, 2.0, size=(500, 2)):
+        assert study.human_in_field(ROBOT, point, 0.25) == banded.human_in_field(ROBOT, point, 0.25)
+
+
+def test_bad_field_shapes_are_errors():
+    with pytest.raises(ValueError, match="side_margin must be >= 0"):
+        LaserSafetyLayer(1.25, side_margin=-0.1)
+    with pytest.raises(ValueError, match="diameter must be positive or None"):
+        LaserSafetyLayer(0.0)

@@ -16,7 +16,7 @@ from hazardhunt.spec.failure_classes import (
     MechanismClassifier,
     classify_failures,
 )
-from hazardhunt.sut.safety_layer import field_diameter
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
@@ -43,9 +43,10 @@ class Results:
     """Run ids of the campaign that have not finished (they are left out of every table)."""
     classifier: FailureClassifier = MechanismClassifier()
 
-    def classes_for(self, field_setting: str) -> tuple[str, ...]:
-        """The classes a failure can have under a field setting, ``other`` last."""
-        return self.classifier.classes_for(field_diameter(field_setting))
+    def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...]:
+        """The classes a failure can have under a field setting (of ``scenario`` when it
+        defines its own fields), ``other`` last."""
+        return self.classifier.classes_for(setting_diameter(field_setting, scenario))
 
     def run_directory(self, run_id: str) -> Path:
         """Where a run's files are."""
@@ -107,7 +108,7 @@ def _reclassified(
         classes = classify_failures(
             {failure_id: trajectories[failure_id] for failure_id in summaries},
             summaries,
-            field_diameter(str(group["field"].iloc[0])),
+            setting_diameter(str(group["field"].iloc[0]), str(group["scenario"].iloc[0])),
             classifier,
         )
         relabelled.loc[group.index, "class"] = [classes[i] for i in summaries]
@@ -154,3 +155,12 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ResultsError(f"{path}: expected a JSON object")
     return data
+
+
+def setting_diameter(field_setting: str, scenario: str) -> float | None:
+    """The front field's diameter of a built-in field setting or one ``scenario`` defines, in m."""
+    if field_setting in FIELD_SETTINGS:
+        return FIELD_SETTINGS[field_setting]
+    from hazardhunt.world.scenario import field_shape, load_scenario
+
+    return field_shape(load_scenario(scenario), field_setting).diameter

@@ -40,7 +40,7 @@ def class_coverage(results: Results) -> pd.DataFrame:
     """
     rows = []
     for (scenario, field, tester), _ in results.runs.groupby(["scenario", "field", "tester"]):
-        named = results.classes_for(field)[:-1]
+        named = results.classes_for(field, scenario)[:-1]
         failures = results.failures
         mask = (
             (failures["scenario"] == scenario)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 import sys
 from pathlib import Path
@@ -48,6 +49,40 @@ class EnvOptions(_Strict):
     """Continuous emergency-stop time after which an episode stalls, in s."""
 
 
+class PluginSpec(_Strict):
+    """A user's controller or safety layer: an import path and its keyword parameters."""
+
+    path: str
+    """``package.module:Class`` (or a factory function)."""
+    params: dict[str, Any] = {}
+    """Keyword parameters of the class."""
+    search_path: list[str] = []
+    """Directories the module is imported from besides ``sys.path`` (hazardhunt adds the
+    campaign file's directory and the working directory)."""
+
+
+def _check_plugin(kind: str, spec: PluginSpec | None) -> PluginSpec | None:
+    """Build the plug-in once, so that a bad one stops the campaign before any run starts."""
+    if spec is not None:
+        from hazardhunt.sut.plugins import PluginError, build
+
+        try:
+            build(kind, spec.path, spec.params, spec.search_path)
+        except PluginError as error:
+            raise ValueError(str(error)) from None
+    return spec
+
+
+ControllerSpec = Annotated[
+    PluginSpec | None, AfterValidator(functools.partial(_check_plugin, "controller"))
+]
+"""A controller plug-in, built once when the configuration is read."""
+SafetyLayerSpec = Annotated[
+    PluginSpec | None, AfterValidator(functools.partial(_check_plugin, "safety layer"))
+]
+"""A safety-layer plug-in, built once when the configuration is read."""
+
+
 def _check_scenario(value: str) -> str:
     from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError, load_scenario
 
@@ -65,10 +100,17 @@ def _check_scenario(value: str) -> str:
     return value
 
 
-def _check_field(value: str) -> str:
-    if value not in FIELD_SETTINGS:
-        raise ValueError(f"unknown field {value!r}: use one of {', '.join(FIELD_SETTINGS)}")
-    return value
+def _check_fields(scenario: str, fields: list[str]) -> None:
+    """Raises ValueError unless every field is built in or defined by the scenario."""
+    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, field_shape, load_scenario
+
+    if all(f in FIELD_SETTINGS for f in fields):
+        return
+    if scenario not in BUILTIN_SCENARIOS and not Path(scenario).is_file():
+        return  # the scenario's own error is reported
+    loaded = load_scenario(scenario)
+    for name in fields:
+        field_shape(loaded, name)
 
 
 def _check_tester(value: str) -> str:
@@ -79,8 +121,8 @@ def _check_tester(value: str) -> str:
 
 ScenarioName = Annotated[str, AfterValidator(_check_scenario)]
 """A built-in scenario name or a scenario file that loads."""
-FieldSetting = Annotated[str, AfterValidator(_check_field)]
-"""A protective-field setting: none, 1.25m or 2m."""
+FieldSetting = Annotated[str, Field(min_length=1)]
+"""A protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
 TesterName = Annotated[str, AfterValidator(_check_tester)]
 """A built-in tester."""
 
@@ -91,7 +133,7 @@ class RunConfig(_Strict):
     scenario: ScenarioName
     """A built-in scenario name or a scenario file."""
     field: FieldSetting
-    """Protective-field setting: none, 1.25m or 2m."""
+    """Protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
     tester: TesterName
     """The search method: random, ppo-acc or ppo-max."""
     seed: int = Field(ge=0)
@@ -101,6 +143,17 @@ class RunConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester_params: dict[str, Any] = {}
     """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
+    controller: ControllerSpec = None
+    """The robot's controller; the built-in NMPC when None."""
+    safety_layer: SafetyLayerSpec = None
+    """The safety layer; the laser field of ``field`` when None."""
+
+    @field_validator("field")
+    @classmethod
+    def _field_ok(cls, value: str, info: ValidationInfo) -> str:
+        if "scenario" in info.data:
+            _check_fields(info.data["scenario"], [value])
+        return value
 
     @field_validator("tester_params")
     @classmethod
@@ -127,6 +180,17 @@ class CampaignConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester: dict[TesterName, dict[str, Any]] = {}
     """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
+    controller: ControllerSpec = None
+    """The robot's controller of every run (``[controller]``); the built-in NMPC when None."""
+    safety_layer: SafetyLayerSpec = None
+    """The safety layer of every run (``[safety_layer]``); the laser field when None."""
+
+    @field_validator("fields")
+    @classmethod
+    def _fields_ok(cls, values: list[str], info: ValidationInfo) -> list[str]:
+        for scenario in info.data.get("scenarios", []):
+            _check_fields(scenario, values)
+        return values
 
     @field_validator("tester")
     @classmethod
@@ -157,6 +221,8 @@ class CampaignConfig(_Strict):
                 episodes=self.episodes,
                 env=self.env,
                 tester_params=self.tester.get(tester, {}),
+                controller=self.controller,
+                safety_layer=self.safety_layer,
             )
             for scenario in self.scenarios
             for field in self.fields
@@ -192,6 +258,10 @@ def load_campaign(path: Path) -> CampaignConfig:
             else name
             for name in scenarios
         ]
+    # A plug-in's module is found next to the campaign file or in the working directory.
+    for key in ("controller", "safety_layer"):
+        if isinstance(data.get(key), dict) and "search_path" not in data[key]:
+            data[key]["search_path"] = [str(path.parent.resolve()), str(Path.cwd())]
     try:
         return CampaignConfig.model_validate(data)
     except ValidationError as error:

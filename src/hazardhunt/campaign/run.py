@@ -35,14 +35,25 @@ ProgressCallback = Callable[[RunProgress], None]
 
 
 def make_env(config: RunConfig, reward: RewardKind) -> AGVEnv:
-    """The environment a run's configuration describes."""
+    """The environment a run's configuration describes, with its plug-ins built."""
+    from hazardhunt.sut.plugins import build_controller, build_safety_layer
+
     options = config.env
+    controller = safety_layer = None
+    if config.controller is not None:
+        spec = config.controller
+        controller = build_controller(spec.path, spec.params, spec.search_path)
+    if config.safety_layer is not None:
+        spec = config.safety_layer
+        safety_layer = build_safety_layer(spec.path, spec.params, spec.search_path)
     return AGVEnv(
         config.scenario,
         config.field,
         reward=reward,
         decision_period=options.decision_period,
         solver=options.solver,
+        controller=controller,
+        safety_layer=safety_layer,
         termination=TerminationParams(options.episode_duration, options.stall_duration),
     )
 

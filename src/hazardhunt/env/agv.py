@@ -24,7 +24,7 @@ from hazardhunt.spec.risk import RiskParams, risk
 from hazardhunt.spec.safety import ContactVerdict, SafetySpecParams, judge_contact
 from hazardhunt.sut.protocols import ControlCommand, Controller, RobotState, SafetyLayer
 from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
-from hazardhunt.sut.safety_layer import LaserSafetyLayer, field_diameter
+from hazardhunt.sut.safety_layer import LaserSafetyLayer
 from hazardhunt.sut.tracking import HumanTracker
 from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.geometry import (
@@ -34,7 +34,7 @@ from hazardhunt.world.geometry import (
     to_body_frame,
 )
 from hazardhunt.world.kinematics import step_human, step_robot
-from hazardhunt.world.scenario import Scenario, ScenarioError, load_scenario
+from hazardhunt.world.scenario import Scenario, ScenarioError, field_shape, load_scenario
 
 ObsType = NDArray[np.float32]
 ActType = NDArray[np.float32]
@@ -114,7 +114,8 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         Args:
             scenario: A built-in scenario name (``crossing``, ``head-on``, ``overtaking``), a
                 scenario file path, or a loaded :class:`Scenario`.
-            field: Protective-field setting: ``none``, ``1.25m`` or ``2m``.
+            field: Protective-field setting: ``none``, ``1.25m``, ``2m`` or a field the
+                scenario defines.
             reward: ``acc`` (accumulated risk) or ``max`` (episode's maximum risk at the end).
             decision_period: Time the human holds each action, in s; a multiple of the
                 controller's period.
@@ -140,7 +141,8 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             raise ValueError(f"render_mode must be None or 'rgb_array', not {render_mode!r}")
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.field = field
-        self.field_diameter = field_diameter(field)
+        self.field_shape = field_shape(self.scenario, field)
+        self.field_diameter = self.field_shape.diameter
         self.reward_kind: RewardKind = reward
         self.robot_params = robot
         self.human_params = human
@@ -176,7 +178,9 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         self.safety_layer: SafetyLayer = (
             safety_layer
             if safety_layer is not None
-            else LaserSafetyLayer(self.field_diameter, robot=robot)
+            else LaserSafetyLayer(
+                self.field_shape.diameter, robot=robot, side_margin=self.field_shape.side_margin
+            )
         )
         self.tracker = HumanTracker(self.scenario.floor)
         self._control_every = _whole_multiple(

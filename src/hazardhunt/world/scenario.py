@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -50,6 +51,16 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class FieldShape:
+    """A protective-field shape: a half-disc ahead of the robot and bands along its sides."""
+
+    diameter: float | None
+    """Diameter of the half-disc ahead of the front face, in m (None: no front field)."""
+    side_margin: float = 0.0
+    """Width of the bands along both sides, in m (0: the sides are not covered)."""
+
+
+@dataclass(frozen=True)
 class Scenario:
     """An initial state on a floor: where the robot starts and must go, where the human starts."""
 
@@ -64,6 +75,8 @@ class Scenario:
     description: str = ""
     source: str = ""
     """The file the scenario was loaded from."""
+    fields: dict[str, FieldShape] = dataclass_field(default_factory=dict)
+    """Field settings the scenario defines besides the built-in ones, by name."""
 
 
 class _Strict(BaseModel):
@@ -136,12 +149,28 @@ class _HumanSpec(_Strict):
     start: _PoseSpec
 
 
+class _FieldSpec(_Strict):
+    diameter: float | None = Field(default=None, gt=0)
+    side_margin: float = Field(default=0.0, ge=0)
+
+
 class _ScenarioSpec(_Strict):
     name: str
     description: str = ""
     map: str | _MapSpec
     robot: _RobotSpec
     human: _HumanSpec
+    fields: dict[str, _FieldSpec] = {}
+
+    @field_validator("fields")
+    @classmethod
+    def _no_builtin_names(cls, fields: dict[str, _FieldSpec]) -> dict[str, _FieldSpec]:
+        from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+
+        for name in fields:
+            if name in FIELD_SETTINGS:
+                raise ValueError(f"{name!r} is a built-in field setting and cannot be redefined")
+        return fields
 
 
 def builtin_scenario_path(name: str) -> Path:
@@ -172,6 +201,26 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         floor = _build_floor(_parse(map_path, _MapSpec))
     else:
         floor = _build_floor(spec.map)
+    return _build_scenario(spec, floor, path)
+
+
+def scenario_from_data(data: dict[str, Any], source: str) -> Scenario:
+    """A scenario from the contents of a scenario file whose ``map`` is an inline table (as
+    regression cases store it); errors name ``source``.
+
+    Raises:
+        ScenarioError: A field is wrong.
+    """
+    try:
+        spec = _ScenarioSpec.model_validate(data)
+    except ValidationError as error:
+        raise ScenarioError(f"{source}: {format_validation_error(error)}") from error
+    if isinstance(spec.map, str):
+        raise ScenarioError(f"{source}: map: must be an inline table here, not a file name")
+    return _build_scenario(spec, _build_floor(spec.map), Path(source))
+
+
+def _build_scenario(spec: _ScenarioSpec, floor: FloorMap, path: Path) -> Scenario:
     scenario = Scenario(
         name=spec.name,
         description=spec.description,
@@ -181,6 +230,10 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         goal=np.array([spec.robot.goal.x, spec.robot.goal.y]),
         human_start=_pose(spec.human.start),
         source=str(path),
+        fields={
+            name: FieldShape(field.diameter, field.side_margin)
+            for name, field in spec.fields.items()
+        },
     )
     _check_placement(scenario, path)
     return scenario
@@ -247,3 +300,34 @@ def _check_placement(scenario: Scenario, path: Path) -> None:
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
             )
+
+
+def field_shape(scenario: Scenario, setting: str) -> FieldShape:
+    """The shape of a field setting: one the scenario defines, or a built-in one.
+
+    Raises:
+        ValueError: Naming the settings there are.
+    """
+    from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+
+    if setting in scenario.fields:
+        return scenario.fields[setting]
+    if setting in FIELD_SETTINGS:
+        return FieldShape(FIELD_SETTINGS[setting])
+    known = [*FIELD_SETTINGS, *scenario.fields]
+    raise ValueError(f"unknown field {setting!r}: use one of {', '.join(known)}")
+
+
+def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
+    """The contents of a built-in scenario or a scenario file, with a map file it names
+    inlined as the ``map`` table: everything needed to rebuild it elsewhere.
+
+    Raises:
+        ScenarioError: The scenario does not load.
+    """
+    scenario = load_scenario(name_or_path)  # reports any problem with the files first
+    path = Path(scenario.source)
+    data: dict[str, Any] = tomllib.loads(path.read_text(encoding="utf-8"))
+    if isinstance(data.get("map"), str):
+        data["map"] = tomllib.loads((path.parent / data["map"]).read_text(encoding="utf-8"))
+    return data

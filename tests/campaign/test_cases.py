@@ -1,0 +1,127 @@
+"""Failures as regression cases: export from a run, re-run against the same and a changed SUT."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hazardhunt.campaign.cases import CaseError, regress_case
+from hazardhunt.campaign.toml_writer import dumps
+from tests.helpers import hazardhunt
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+EXAMPLE = Path(__file__).parents[2] / "examples" / "pure_pursuit"
+SIDE_BANDS = [
+    "--safety-layer", "hazardhunt.sut.safety_layer:LaserSafetyLayer",
+    "--safety-layer-param", "diameter=1.25", "--safety-layer-param", "side_margin=0.4",
+]  # fmt: skip
+"""The study's 1.25 m field plus 0.4 m bands along the robot's sides."""
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """The example controller with the 1.25 m field: the field stops front contacts, so the
+    failures found are mostly at the unguarded sides."""
+    out = tmp_path_factory.mktemp("cases") / "run"
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "1.25m", "--tester", "random",
+        "--episodes", 300, "--seed", 0, "--out", out, "--controller",
+        "cautious_pursuit:CautiousPursuit", cwd=EXAMPLE,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def cases(run):
+    out = run.parent / "cases"
+    done = hazardhunt("export", run, "--out", out)
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def regress(cases, *args):
+    done = hazardhunt("regress", cases, "--json", *args, cwd=EXAMPLE)
+    return done.returncode, json.loads(done.stdout)
+
+
+def test_export_writes_one_readable_case_per_class(run, cases):
+    files = sorted(cases.glob("*.toml"))
+    classes = [tomllib.loads(f.read_text())["expected"]["class"] for f in files]
+    failures = pd.read_parquet(run / "failures.parquet")
+    assert sorted(classes) == sorted(set(failures["class"]))
+    case = tomllib.loads(files[0].read_text())
+    assert case["sut"]["controller"]["path"] == "cautious_pursuit:CautiousPursuit"
+    assert case["environment"]["field"] == "1.25m"
+    assert case["scenario"]["name"] == "crossing"
+    assert isinstance(case["scenario"]["map"], dict)  # the map travels with the case
+    assert case["expected"]["outcome"] == "failure"
+    assert files[0].read_text().startswith("# A failure hazardhunt found")
+    every = run.parent / "every"
+    assert hazardhunt("export", run, "--out", every, "--all").returncode == 0
+    assert len(list(every.glob("*.toml"))) == len(failures)
+
+
+def test_the_unchanged_sut_still_fails_every_case(cases):
+    code, report = regress(cases)
+    assert code == 1
+    assert {case["verdict"] for case in report["cases"]} == {"still fails"}
+    assert report["counts"]["still fails"] == len(list(cases.glob("*.toml")))
+
+
+def test_a_field_that_also_covers_the_sides_fixes_the_side_gap_cases(cases):
+    code, report = regress(cases, *SIDE_BANDS)
+    side = [c for c in report["cases"] if c["expected_class"].startswith("side-")]
+    assert side, "the run should have found failures at the robot's sides"
+    assert {c["verdict"] for c in side} == {"fixed"}
+    assert code == (1 if report["counts"]["still fails"] + report["counts"]["changed"] else 0)
+
+
+def test_a_broken_case_file_names_the_file_and_key(cases, tmp_path):
+    text = next(cases.glob("*.toml")).read_text()
+    broken = tmp_path / "broken.toml"
+    broken.write_text(text.replace("decision_period = ", "decision_periods = "))
+    with pytest.raises(CaseError, match=r"broken.toml: environment.decision_period: missing"):
+        regress_case(broken)
+    done = hazardhunt("regress", broken)
+    assert done.returncode == 2
+    assert "broken.toml: environment.decision_period: missing" in done.stderr
+
+
+def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
+    out = tmp_path / "cases"
+    assert hazardhunt("export", run, "--out", out, "--pytest").returncode == 0
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=EXAMPLE,
+        check=False,
+    )
+    count = len(list(out.glob("*.toml")))
+    assert done.returncode == 1, done.stdout
+    assert f"{count} failed" in done.stdout
+
+
+def test_case_files_read_back_exactly():
+    data = {
+        "sum": 0.1 + 0.2,
+        "text": 'quote " newline \n backslash \\ ünïcode',
+        "infinite": float("inf"),
+        "flag": True,
+        "empty": {},
+        "pose": {"x": 1.0, "y": 2.5},
+        "actions": [[float(np.float32(v)), -0.5] for v in np.linspace(-1, 1, 9)],
+        "nested": {"list": [1, 2], "deeper": {"key": "value"}},
+        "obstacles": [{"name": "a", "polygon": [[0, 0], [1, 0], [1, 1]]}, {"name": "b"}],
+        "key with space": 3,
+    }
+    assert tomllib.loads(dumps(data, "# a comment")) == data

@@ -1,0 +1,140 @@
+"""Your own controller and safety layer, loaded by import path from the command line and from
+campaign files: the worked example finds failures, bad plug-ins are clear errors, and a
+controller that raises is a recorded sut_error."""
+
+import json
+import shutil
+import textwrap
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from hazardhunt.campaign.config import ConfigError, load_campaign
+from hazardhunt.sut.plugins import PluginError, build_controller, build_safety_layer
+from tests.helpers import hazardhunt
+
+EXAMPLE = Path(__file__).parents[2] / "examples" / "pure_pursuit"
+CONTROLLER = "cautious_pursuit:CautiousPursuit"
+
+
+def plugin_module(folder: Path, source: str, name: str = "my_sut") -> Path:
+    path = folder / f"{name}.py"
+    path.write_text(textwrap.dedent(source))
+    return path
+
+
+RAISING = """
+    from hazardhunt.sut.protocols import ControlCommand
+
+    class Raising:
+        control_period = 0.2
+
+        def reset(self, floor, route, robot):
+            pass
+
+        def control(self, time, robot, human):
+            if time >= 1.0:
+                raise RuntimeError("lost the localisation")
+            return ControlCommand(speed=0.5, yaw_rate=0.0)
+
+    class NotAController:
+        def control(self, time, robot, human):
+            pass
+"""
+
+
+def test_the_example_controller_from_the_command_line_fails_within_a_few_hundred_episodes(
+    tmp_path,
+):
+    out = tmp_path / "run"
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
+        "--episodes", 150, "--seed", 0, "--out", out, "--json",
+        "--controller", CONTROLLER, "--controller-param", "stop_distance=1.0",
+        cwd=EXAMPLE,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["failures"] > 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["run"]["controller"]["path"] == CONTROLLER
+    assert config["run"]["controller"]["params"] == {"stop_distance": 1.0}
+    # Its failures replay exactly: the run loads the plug-in again.
+    failure = int(pd.read_parquet(out / "failures.parquet")["failure_id"].iloc[0])
+    replayed = hazardhunt("replay", out, "--failure", failure, cwd=EXAMPLE)
+    assert replayed.returncode == 0, replayed.stderr
+    assert "reproduced" in replayed.stdout
+
+
+def test_the_example_controller_from_a_campaign_file_fails(tmp_path):
+    shutil.copy(EXAMPLE / "cautious_pursuit.py", tmp_path)
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [1]\n'
+        'episodes = 150\n[controller]\npath = "cautious_pursuit:CautiousPursuit"\n'
+        "params = { stop_distance = 1.0 }\n"
+    )
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "results", cwd=Path("/"))
+    assert done.returncode == 0, done.stderr
+    (run,) = (tmp_path / "results" / "runs").iterdir()
+    assert json.loads((run / "summary.json").read_text())["failures"] > 0
+
+
+@pytest.mark.parametrize(
+    ("path", "message"),
+    [
+        ("no_such_module:Thing", "cannot import module 'no_such_module'"),
+        ("my_sut:Missing", "module 'my_sut' has no attribute 'Missing'"),
+        ("my_sut", "is not an import path of the form 'package.module:Name'"),
+        ("my_sut:NotAController", "does not satisfy the Controller protocol: it lacks"),
+    ],
+)
+def test_a_bad_controller_is_one_clear_line_and_runs_nothing(tmp_path, path, message):
+    plugin_module(tmp_path, RAISING)
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
+        "--episodes", 2, "--out", tmp_path / "run", "--controller", path, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert message in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
+
+
+def test_parameters_the_class_does_not_take_are_named(tmp_path):
+    with pytest.raises(PluginError, match=r"does not take these parameters: .*'stop_distnce'"):
+        build_controller(CONTROLLER, {"stop_distnce": 1.0}, [str(EXAMPLE)])
+
+
+def test_a_campaign_file_with_a_bad_controller_names_the_file_and_key(tmp_path):
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [0]\n'
+        'episodes = 3\n[controller]\npath = "nowhere:Controller"\n'
+    )
+    with pytest.raises(ConfigError, match=r"campaign.toml: controller: .*cannot import module"):
+        load_campaign(campaign)
+
+
+def test_a_controller_that_raises_is_a_recorded_sut_error(tmp_path):
+    plugin_module(tmp_path, RAISING)
+    out = tmp_path / "run"
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 3, "--out", out, "--json", "--controller", "my_sut:Raising", cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["sut_errors"] == 3
+    episodes = pd.read_parquet(out / "episodes.parquet")
+    assert set(episodes["outcome"]) == {"sut_error"}
+    assert all("RuntimeError: lost the localisation" in e for e in episodes["controller_errors"])
+
+
+def test_the_laser_field_with_side_bands_loads_as_a_safety_layer():
+    layer = build_safety_layer(
+        "hazardhunt.sut.safety_layer:LaserSafetyLayer", {"diameter": 1.25, "side_margin": 0.4}
+    )
+    assert layer.side_margin == 0.4
+    with pytest.raises(PluginError, match="does not satisfy the SafetyLayer protocol"):
+        build_safety_layer("hazardhunt.sut.route:Route", {"points": [[0, 0], [1, 0]]})
