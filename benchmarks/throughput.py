@@ -26,7 +26,7 @@ from typing import Any
 import pandas as pd
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import execute_run
+from hazardhunt.campaign.run import RunProgress, execute_run
 from hazardhunt.sut.nmpc import NMPCController
 from hazardhunt.testers import TESTER_NAMES
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
@@ -45,15 +45,28 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
         finally:
             controller_s[0] += time.perf_counter() - started
 
-    NMPCController.control = timed_control  # type: ignore[method-assign]
+    NMPCController.control = timed_control  # type: ignore[method-assign,assignment]
+    # Steady state: from the end of the first episode on, without the start-up (imports, the
+    # tester's and the NMPC's construction) that a long run amortises.
+    first: dict[str, float] = {}
+
+    def progress(state: RunProgress) -> None:
+        if state.episodes_done == 1:
+            first.update(time=time.perf_counter(), controller_s=controller_s[0])
+
     with tempfile.TemporaryDirectory() as folder:
         started = time.perf_counter()
         directory = Path(folder) / "run"
-        summary = execute_run(config, directory)
-        wall = time.perf_counter() - started
+        summary = execute_run(config, directory, progress)
+        ended = time.perf_counter()
+        wall = ended - started
         episodes = pd.read_parquet(directory / "episodes.parquet")
         physics_step = json.loads((directory / "config.json").read_text())["physics_step"]
-    solve_s = float((episodes["solves"] * episodes["solve_time_mean_s"]).sum())
+    solve_per_episode = episodes["solves"] * episodes["solve_time_mean_s"]
+    solve_s = float(solve_per_episode.sum())
+    steady_wall = ended - first["time"]
+    steady_solve_s = float(solve_per_episode.iloc[1:].sum())
+    steady_controller_s = controller_s[0] - first["controller_s"]
     return {
         "scenario": config.scenario,
         "field": config.field,
@@ -69,6 +82,9 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
         "overhead_share": 1.0 - solve_s / wall,
         "controller_s": controller_s[0],
         "outside_controller_share": 1.0 - controller_s[0] / wall,
+        "steady_episodes_per_s": (summary["episodes"] - 1) / steady_wall,
+        "steady_overhead_share": 1.0 - steady_solve_s / steady_wall,
+        "steady_outside_controller_share": 1.0 - steady_controller_s / steady_wall,
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     }
 
@@ -106,15 +122,21 @@ def main() -> None:
             with context.Pool(1) as pool:  # a fresh process: its own peak memory
                 runs.append(pool.apply(measure_run, (config,)))
     print(f"runs of {args.episodes} episodes, field {args.field}, one process at a time")
+    print("overhead: outside the solver call; no ctrl: outside the controller; steady: after")
+    print("the first episode (without start-up)")
     print(
-        f"{'tester':8} {'scenario':11} {'episodes/s':>10} {'decisions/s':>11} "
-        f"{'physics/s':>9} {'overhead':>8} {'no ctrl':>8} {'peak MiB':>8} {'failures':>8}"
+        f"{'tester':8} {'scenario':11} {'episodes/s':>10} {'steady':>7} {'decisions/s':>11} "
+        f"{'physics/s':>9} {'overhead':>8} {'steady':>7} {'no ctrl':>8} {'steady':>7} "
+        f"{'peak MiB':>8} {'failures':>8}"
     )
     for r in runs:
         print(
             f"{r['tester']:8} {r['scenario']:11} {r['episodes_per_s']:10.2f} "
+            f"{r['steady_episodes_per_s']:7.2f} "
             f"{r['decision_steps_per_s']:11.1f} {r['physics_steps_per_s']:9.0f} "
-            f"{100 * r['overhead_share']:7.1f}% {100 * r['outside_controller_share']:7.1f}% "
+            f"{100 * r['overhead_share']:7.1f}% {100 * r['steady_overhead_share']:6.1f}% "
+            f"{100 * r['outside_controller_share']:7.1f}% "
+            f"{100 * r['steady_outside_controller_share']:6.1f}% "
             f"{r['peak_rss_mib']:8.0f} {r['failures']:8d}"
         )
 

@@ -125,3 +125,19 @@ def test_case_files_read_back_exactly():
         "key with space": 3,
     }
     assert tomllib.loads(dumps(data, "# a comment")) == data
+
+
+def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):
+    (tmp_path / "crashing.py").write_text(
+        "class Crashing:\n"
+        "    control_period = 0.2\n"
+        "    def reset(self, floor, route, robot):\n"
+        "        pass\n"
+        "    def control(self, time, robot, human):\n"
+        "        raise RuntimeError('no route')\n"
+    )
+    done = hazardhunt("regress", cases, "--json", "--controller", "crashing:Crashing", cwd=tmp_path)
+    assert done.returncode == 1
+    report = json.loads(done.stdout)
+    assert {c["verdict"] for c in report["cases"]} == {"changed"}
+    assert {c["outcome"] for c in report["cases"]} == {"sut_error"}

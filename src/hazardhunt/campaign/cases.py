@@ -7,8 +7,9 @@ the run observed with its failure class. Re-running a case plays the same action
 today's SUT (or one given instead) and compares:
 
 - ``still fails``: a failure of the same class;
-- ``changed``: a failure of another class (it fails differently);
-- ``fixed``: no failure.
+- ``changed``: a failure of another class, or the SUT erred (``sut_error``): it fails
+  differently;
+- ``fixed``: neither.
 """
 
 from __future__ import annotations
@@ -130,7 +131,7 @@ def _case(row: pd.Series, config: Any) -> dict[str, Any]:
             "outcome": str(row["outcome"]),
             "class": failure_class,
             "sim_time": float(row["sim_time"]),
-            "contact_face": str(row.get("contact_face", "")),
+            "contact_face": str(row.get("contact_face") or ""),
         },
         "found": {
             "run_id": str(row["run_id"]),
@@ -243,12 +244,12 @@ def regress_case(
             env.trajectory(), info["summary"], env.field_diameter
         )
     expected = case["expected"]["class"]
-    if failure_class is None:
-        verdict = "fixed"
-    elif failure_class == expected:
+    if failure_class == expected:
         verdict = "still fails"
-    else:
+    elif failure_class is not None or outcome == "sut_error":
         verdict = "changed"
+    else:
+        verdict = "fixed"
     return RegressionResult(
         path.name, expected, outcome, failure_class, float(info["sim_time"]), verdict
     )
