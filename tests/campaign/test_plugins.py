@@ -138,3 +138,18 @@ def test_the_laser_field_with_side_bands_loads_as_a_safety_layer():
     assert layer.side_margin == 0.4
     with pytest.raises(PluginError, match="does not satisfy the SafetyLayer protocol"):
         build_safety_layer("hazardhunt.sut.route:Route", {"points": [[0, 0], [1, 0]]})
+
+
+def test_a_run_on_your_own_scenario_is_found_again_from_any_folder(tmp_path):
+    out = tmp_path / "run"
+    done = hazardhunt(
+        "run", "--scenario", "../loading_dock/dock_crossing.toml", "--field", "sides",
+        "--tester", "random", "--episodes", 20, "--out", out, "--controller", CONTROLLER,
+        cwd=EXAMPLE,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    stored = json.loads((out / "config.json").read_text())["run"]["scenario"]
+    assert Path(stored).is_absolute()
+    assert Path(stored) == (EXAMPLE.parent / "loading_dock" / "dock_crossing.toml").resolve()
+    report = hazardhunt("report", out, cwd=tmp_path)
+    assert report.returncode == 0, report.stderr

@@ -97,7 +97,8 @@ def _check_scenario(value: str) -> str:
         load_scenario(value)
     except ScenarioError as error:
         raise ValueError(str(error)) from None
-    return value
+    # Absolute, so that replays, reports and exports find it from any working directory.
+    return str(Path(value).resolve())
 
 
 def _check_fields(scenario: str, fields: list[str]) -> None:
