@@ -32,6 +32,15 @@ def run_solver(solver: str, episodes: int, field: str, seed: int) -> dict[str, A
         jit=variant == "jit",
     )
     controller = NMPCController(params)
+    iterations: list[float] = []
+    control = controller.control
+
+    def counted(*args: Any) -> Any:  # the solver's iterations of every call, retries included
+        command = control(*args)
+        iterations.append(command.extras.get("iterations", np.nan))
+        return command
+
+    controller.control = counted  # type: ignore[method-assign,assignment]
     solve_times: list[float] = []
     failed = decisions = physics_steps = episode_count = 0
     outcomes: dict[str, int] = {}
@@ -67,6 +76,12 @@ def run_solver(solver: str, episodes: int, field: str, seed: int) -> dict[str, A
             "max": float(times_ms.max()),
             "mean": float(times_ms.mean()),
         },
+        "iterations": {
+            "median": float(np.nanmedian(iterations)),
+            "mean": float(np.nanmean(iterations)),
+            "p99": float(np.nanpercentile(iterations, 99)),
+        },
+        "ms_per_iteration": float(times_ms.sum() / np.nansum(iterations)),
         "solve_share_of_wall": float(times_ms.sum() / 1e3 / wall),
         "wall_s": wall,
         "episodes_per_s": episode_count / wall,

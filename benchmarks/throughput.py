@@ -144,12 +144,16 @@ def main() -> None:
         run_solver(name, args.solver_episodes, args.field, args.seed) for name in args.solvers
     ]
     print(f"\nNMPC in closed loop, random human, {args.solver_episodes} episodes x scenario (ms)")
-    print(f"{'solver':10} {'solves':>7} {'median':>7} {'p95':>7} {'p99':>7} {'max':>7}")
+    print(
+        f"{'solver':18} {'solves':>7} {'median':>7} {'p95':>7} {'p99':>7} {'max':>7} "
+        f"{'iterations':>10} {'ms/iter':>7}"
+    )
     for r in solvers:
         ms = r["solve_ms"]
         print(
-            f"{r['solver']:10} {r['solves']:7d} {ms['median']:7.3f} {ms['p95']:7.3f} "
-            f"{ms['p99']:7.3f} {ms['max']:7.2f}"
+            f"{r['solver']:18} {r['solves']:7d} {ms['median']:7.3f} {ms['p95']:7.3f} "
+            f"{ms['p99']:7.3f} {ms['max']:7.2f} {r['iterations']['median']:10.0f} "
+            f"{r['ms_per_iteration']:7.3f}"
         )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(

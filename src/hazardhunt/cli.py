@@ -310,7 +310,7 @@ def regress(
 
     Exits with code 1 while any case still fails or changed, so that it can gate a CI job.
     """
-    from hazardhunt.campaign.cases import case_files, regress_case
+    from hazardhunt.campaign.cases import VERDICTS, case_files, regress_case
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
@@ -325,7 +325,7 @@ def regress(
                 )
             )
             progress.advance(task)
-    counts = {v: sum(r.verdict == v for r in results) for v in ("still fails", "changed", "fixed")}
+    counts = {v: sum(r.verdict == v for r in results) for v in VERDICTS}
     if json_output:
         print(json.dumps({"cases": [vars(r) for r in results], "counts": counts}))
     else:

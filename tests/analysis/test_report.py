@@ -11,7 +11,7 @@ from PIL import Image
 
 from hazardhunt.analysis.results import ResultsError, load_results
 from hazardhunt.spec.failure_classes import MechanismClassifier
-from hazardhunt.sut.safety_layer import field_diameter
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from tests.helpers import hazardhunt
 
 TABLES = (
@@ -39,7 +39,7 @@ def test_every_failure_is_classified_with_a_class_of_its_field_setting(campaign)
     for run in (campaign / "runs").iterdir():
         failures = pd.read_parquet(run / "failures.parquet")
         summary = json.loads((run / "summary.json").read_text())
-        allowed = MechanismClassifier().classes_for(field_diameter(summary["field"]))
+        allowed = MechanismClassifier().classes_for(FIELD_SETTINGS[summary["field"]])
         assert failures["class"].isin(allowed).all()
         assert summary["classes"] == [c for c in allowed if c in set(failures["class"])]
 

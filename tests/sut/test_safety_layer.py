@@ -4,13 +4,15 @@ import numpy as np
 import pytest
 
 from hazardhunt.sut.protocols import RobotState
-from hazardhunt.sut.safety_layer import FIELD_SETTINGS, LaserSafetyLayer, field_diameter
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS, LaserSafetyLayer
+from hazardhunt.world.geometry import point_half_disc_distance, to_body_frame
+from hazardhunt.world.scenario import field_shape, load_scenario
 
 ROBOT = RobotState(x=0.0, y=0.0, heading=0.0, speed=1.0, yaw_rate=0.0)
 
 
 def in_field(setting, point, robot=ROBOT):
-    return LaserSafetyLayer(field_diameter(setting)).human_in_field(robot, np.array(point), 0.25)
+    return LaserSafetyLayer(FIELD_SETTINGS[setting]).human_in_field(robot, np.array(point), 0.25)
 
 
 @pytest.mark.parametrize(
@@ -53,8 +55,8 @@ def test_no_field_never_stops():
 
 
 def test_unknown_setting_is_a_clear_error():
-    with pytest.raises(ValueError, match="unknown field setting '3m'"):
-        field_diameter("3m")
+    with pytest.raises(ValueError, match="unknown field '3m'"):
+        field_shape(load_scenario("crossing"), "3m")
 
 
 def test_side_bands_cover_the_robots_sides_up_to_their_width():
@@ -71,10 +73,13 @@ def test_side_bands_cover_the_robots_sides_up_to_their_width():
 
 
 def test_without_side_bands_the_layer_is_the_studys():
+    # The study's field: the human disc overlaps the half-disc ahead of the front face.
     rng = np.random.default_rng(0)
-    study, banded = LaserSafetyLayer(1.25), LaserSafetyLayer(1.25, side_margin=0.0)
+    layer = LaserSafetyLayer(1.25)
     for point in rng.uniform(-2.0, 2.0, size=(500, 2)):
-        assert study.human_in_field(ROBOT, point, 0.25) == banded.human_in_field(ROBOT, point, 0.25)
+        forward, left = to_body_frame(point, ROBOT.x, ROBOT.y, ROBOT.heading)
+        study = point_half_disc_distance(forward - 0.32, left, 0.625) < 0.25
+        assert layer.human_in_field(ROBOT, point, 0.25) == study
 
 
 def test_bad_field_shapes_are_errors():

@@ -21,24 +21,31 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import PluginSpec
-from hazardhunt.campaign.replay import load_run_config
+from hazardhunt.campaign.config import EnvOptions, PluginSpec
+from hazardhunt.campaign.replay import load_run_config, play
+from hazardhunt.campaign.run import build_env
 from hazardhunt.campaign.toml_writer import dumps
-from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.failure_classes import MechanismClassifier
-from hazardhunt.spec.outcomes import TerminationParams
-from hazardhunt.sut.plugins import PluginError, build_controller, build_safety_layer
-from hazardhunt.world.scenario import ScenarioError, scenario_data, scenario_from_data
+from hazardhunt.sut.plugins import PluginError
+from hazardhunt.world.scenario import (
+    ScenarioError,
+    format_validation_error,
+    scenario_data,
+    scenario_from_data,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
+_ENV_OPTIONS = ("decision_period", "solver", "episode_duration", "stall_duration")
+"""The keys of a case's ``environment`` that are the run's environment options."""
 CASE_FORMAT = 1
 """Version of the case file layout."""
 VERDICTS = ("still fails", "changed", "fixed")
@@ -121,11 +128,8 @@ def _case(row: pd.Series, config: Any) -> dict[str, Any]:
         ),
         "environment": {
             "field": str(row["field"]),
-            "decision_period": float(row["decision_period"]),
-            "episode_duration": config.env.episode_duration,
-            "stall_duration": config.env.stall_duration,
-            "solver": config.env.solver,
             "seed": int(row["seed"]),
+            **config.env.model_dump(),
         },
         "expected": {
             "outcome": str(row["outcome"]),
@@ -208,35 +212,23 @@ def regress_case(
     sut = case.get("sut", {})
     controller = controller or _spec(path, sut, "controller")
     safety_layer = safety_layer or _spec(path, sut, "safety_layer")
-    field_setting = field or environment["field"]
     try:
-        env = AGVEnv(
-            scenario,
-            field_setting,
-            decision_period=environment["decision_period"],
-            solver=environment["solver"],
-            controller=None
-            if controller is None
-            else build_controller(controller.path, controller.params, controller.search_path),
-            safety_layer=None
-            if safety_layer is None
-            else build_safety_layer(
-                safety_layer.path, safety_layer.params, safety_layer.search_path
-            ),
-            termination=TerminationParams(
-                environment["episode_duration"], environment["stall_duration"]
-            ),
+        options = EnvOptions.model_validate(
+            {key: environment[key] for key in _ENV_OPTIONS if key in environment}
         )
-    except (KeyError, TypeError, ValueError) as error:
+    except ValidationError as error:
+        raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
+    try:
+        env = build_env(
+            scenario, field or environment["field"], options, "max", controller, safety_layer
+        )
+    except ScenarioError as error:
+        raise CaseError(f"{path}: environment: {error}") from None
+    except ValueError as error:
         if isinstance(error, PluginError):
             raise
         raise CaseError(f"{path}: environment: {error}") from None
-    env.reset(seed=environment["seed"])
-    info: dict[str, Any] = {"outcome": None, "sim_time": 0.0}
-    for action in case["human"]["actions"]:
-        _, _, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
-        if terminated or truncated:
-            break
+    info = play(env, environment["seed"], case["human"]["actions"])
     outcome = info["outcome"] or "unfinished"
     failure_class = None
     if outcome == "failure":
@@ -292,7 +284,6 @@ def _read_case(path: Path) -> dict[str, Any]:
         )
     ):
         raise CaseError(f"{path}: human.actions: must be a non-empty list of [speed, turn] pairs")
-    case["environment"].setdefault("solver", "fatrop")
     case["environment"].setdefault("seed", 0)
     return case
 

@@ -84,13 +84,19 @@ def replay_actions(
         The env after the episode (its trajectory is the episode's) and the last step's info.
     """
     env = make_env(config, reward)
-    env.reset(seed=config.seed)
+    return env, play(env, config.seed, actions)
+
+
+def play(env: AGVEnv, seed: int, actions: Any) -> dict[str, Any]:
+    """Reset ``env`` with ``seed`` and step it with ``actions`` until the episode ends or they
+    run out; the last step's info (outcome None when the actions ran out first)."""
+    env.reset(seed=seed)
     info: dict[str, Any] = {"outcome": None, "sim_time": 0.0}
     for action in actions:
         _, _, terminated, truncated, info = env.step(np.asarray(list(action), dtype=np.float32))
         if terminated or truncated:
             break
-    return env, info
+    return info
 
 
 def replay_failure(run_directory: Path, failure_id: int) -> ReplayResult:

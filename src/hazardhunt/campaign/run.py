@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import hazardhunt
-from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.config import EnvOptions, PluginSpec, RunConfig
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
@@ -19,6 +19,7 @@ from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder
+from hazardhunt.world.scenario import Scenario
 
 
 @dataclass(frozen=True)
@@ -36,24 +37,38 @@ ProgressCallback = Callable[[RunProgress], None]
 
 def make_env(config: RunConfig, reward: RewardKind) -> AGVEnv:
     """The environment a run's configuration describes, with its plug-ins built."""
+    return build_env(
+        config.scenario, config.field, config.env, reward, config.controller, config.safety_layer
+    )
+
+
+def build_env(
+    scenario: str | Scenario,
+    field: str,
+    options: EnvOptions,
+    reward: RewardKind = "max",
+    controller: PluginSpec | None = None,
+    safety_layer: PluginSpec | None = None,
+) -> AGVEnv:
+    """An environment from its parts: the built-in SUT unless plug-ins are given.
+
+    Raises:
+        PluginError: A plug-in does not load.
+    """
     from hazardhunt.sut.plugins import build_controller, build_safety_layer
 
-    options = config.env
-    controller = safety_layer = None
-    if config.controller is not None:
-        spec = config.controller
-        controller = build_controller(spec.path, spec.params, spec.search_path)
-    if config.safety_layer is not None:
-        spec = config.safety_layer
-        safety_layer = build_safety_layer(spec.path, spec.params, spec.search_path)
     return AGVEnv(
-        config.scenario,
-        config.field,
+        scenario,
+        field,
         reward=reward,
         decision_period=options.decision_period,
         solver=options.solver,
-        controller=controller,
-        safety_layer=safety_layer,
+        controller=None
+        if controller is None
+        else build_controller(controller.path, controller.params, controller.search_path),
+        safety_layer=None
+        if safety_layer is None
+        else build_safety_layer(safety_layer.path, safety_layer.params, safety_layer.search_path),
         termination=TerminationParams(options.episode_duration, options.stall_duration),
     )
 

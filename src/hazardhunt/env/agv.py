@@ -142,7 +142,6 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         self.field = field
         self.field_shape = field_shape(self.scenario, field)
-        self.field_diameter = self.field_shape.diameter
         self.reward_kind: RewardKind = reward
         self.robot_params = robot
         self.human_params = human
@@ -276,6 +275,11 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         clipped = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
         speed = 0.5 * (float(clipped[0]) + 1.0) * self.human_params.max_speed
         return speed, float(clipped[1]) * self.human_params.max_turn_rate
+
+    @property
+    def field_diameter(self) -> float | None:
+        """Diameter of the protective field's half-disc ahead of the robot, in m (None: none)."""
+        return self.field_shape.diameter
 
     # ------------------------------------------------------------------ physics
     def _physics(self, speed: float, turn_rate: float) -> tuple[float, Outcome | None]:

@@ -40,15 +40,15 @@ _ENTRY = """
 /* hazardhunt: one solve with plain pointers, and fatrop's status and iteration count. */
 CASADI_SYMBOL_EXPORT int hazardhunt_solve(const casadi_real* x0, const casadi_real* p,
     const casadi_real* lbx, const casadi_real* ubx, const casadi_real* lbg,
-    const casadi_real* ubg, casadi_real* x, casadi_real* f, casadi_real* lam_x,
-    casadi_real* lam_g, casadi_int* iw, casadi_real* w, int mem, int* out) {
+    const casadi_real* ubg, casadi_real* x, casadi_real* f, casadi_int* iw, casadi_real* w,
+    int mem, int* out) {
   const casadi_real* arg[%(sz_arg)d];
   casadi_real* res[%(sz_res)d];
   int i;
   for (i = 0; i < %(sz_arg)d; ++i) arg[i] = 0;
   for (i = 0; i < %(sz_res)d; ++i) res[i] = 0;
   arg[0] = x0; arg[1] = p; arg[2] = lbx; arg[3] = ubx; arg[4] = lbg; arg[5] = ubg;
-  res[0] = x; res[1] = f; res[3] = lam_x; res[4] = lam_g;
+  res[0] = x; res[1] = f;  /* constraints and multipliers are not needed */
   out[0] = casadi_f0(arg, res, iw, w, mem);
   out[1] = casadi_f0_mem[mem].success;
   out[2] = casadi_f0_mem[mem].return_status;
@@ -107,7 +107,7 @@ class CompiledSolver:
         name = solver.name()
         self._solve = library.hazardhunt_solve
         self._solve.restype = ctypes.c_int
-        self._solve.argtypes = [ctypes.c_void_p] * 12 + [ctypes.c_int, ctypes.c_void_p]
+        self._solve.argtypes = [ctypes.c_void_p] * 10 + [ctypes.c_int, ctypes.c_void_p]
         checkout = getattr(library, f"{name}_checkout")
         checkout.restype = ctypes.c_int
         self._memory = checkout()
@@ -124,19 +124,10 @@ class CompiledSolver:
             np.zeros(n) for n in (variables, parameters, variables, variables, constraints)
         ] + [np.zeros(constraints)]
         self._x, self._cost = np.zeros(variables), np.zeros(1)
-        self._lam_x, self._lam_g = np.zeros(variables), np.zeros(constraints)
         self._iw = np.zeros(max(sizes[2].value, 1), dtype=np.int64)
         self._w = np.zeros(max(sizes[3].value, 1))
         self._out = np.zeros(4, dtype=np.intc)
-        buffers = [
-            *self._inputs,
-            self._x,
-            self._cost,
-            self._lam_x,
-            self._lam_g,
-            self._iw,
-            self._w,
-        ]
+        buffers = [*self._inputs, self._x, self._cost, self._iw, self._w]
         self._pointers = [b.ctypes.data for b in buffers]
         self._out_pointer = self._out.ctypes.data
 

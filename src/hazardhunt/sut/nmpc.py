@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from bisect import bisect_right
 from dataclasses import dataclass, field
-from functools import cached_property
 from time import perf_counter
 from typing import Any, Literal
 
@@ -47,7 +45,6 @@ acceleration (rad/s^2), obstacle slack (m) and keep-out slack (m^2)."""
 _SPEED, _YAW_RATE = 3, 4
 _ACCELERATIONS = slice(5, 7)
 _OBSTACLE_SLACK, _KEEP_OUT_SLACK = 7, 8
-_BOUNDS = ("lbx", "ubx", "lbg", "ubg")
 _DISABLED_OFFSET = -1.0
 """Right-hand side of an unused obstacle slot: with a zero normal the row reads slack >= -1."""
 _BOX_MARGIN = 1e-6
@@ -406,9 +403,8 @@ class _Problem:
                     f"the NMPC runs on CasADi's interpreted solver: {error}", stacklevel=3
                 )
             else:
-                bounds = [np.asarray(self.fixed_arguments[k]).ravel() for k in _BOUNDS]
                 for compiled in (warm, cold):
-                    compiled.set_fixed(*bounds)
+                    compiled.set_fixed(**self.bounds)
                 self.compiled = (warm, cold)
 
     def _formulate(
@@ -513,6 +509,11 @@ class _Problem:
         # Stage N has no accelerations: stage N-1 keeps its own.
         later = np.where(position[later * _STAGE + column] < 0, stage, later)
         self.variable_shift = position[later * _STAGE + column]
+        # The stage table reads stage N's missing accelerations from stage N-1.
+        source = position.reshape(horizon + 1, _STAGE)
+        source[horizon, _ACCELERATIONS] = source[horizon - 1, _ACCELERATIONS]
+        self.stage_source = position
+        """For each entry of the flattened stage table, its variable in the solver's order."""
 
     def _constraint_maps(
         self,
@@ -542,13 +543,14 @@ class _Problem:
         lower[:, 6], upper[:, 6] = -robot.max_yaw_acceleration, robot.max_yaw_acceleration
         lower[:, _OBSTACLE_SLACK:] = 0.0
         upper[0, _OBSTACLE_SLACK:] = 0.0  # stage 0 has no obstacle or keep-out constraints
-        constraint_upper = np.where(self.is_path_row, np.inf, 0.0)
-        self.fixed_arguments = {
-            "lbx": ca.DM(lower.ravel()[self.variable_index]),
-            "ubx": ca.DM(upper.ravel()[self.variable_index]),
-            "lbg": ca.DM(np.zeros(self.constraint_count)),
-            "ubg": ca.DM(constraint_upper),
+        self.bounds: dict[str, FloatArray] = {
+            "lbx": lower.ravel()[self.variable_index],
+            "ubx": upper.ravel()[self.variable_index],
+            "lbg": np.zeros(self.constraint_count),
+            "ubg": np.where(self.is_path_row, np.inf, 0.0),
         }
+        """The variable and constraint bounds, the same for every call."""
+        self.fixed_arguments = {key: ca.DM(value) for key, value in self.bounds.items()}
 
     def parameters(
         self,
@@ -625,7 +627,7 @@ class _Problem:
         self, x: FloatArray, cost: float, success: bool, status: object, iterations: float
     ) -> _Outcome:
         """The solver's flat solution and statistics as an outcome."""
-        stages = x.take(self._stage_source).reshape(self.params.horizon + 1, _STAGE)
+        stages = x.take(self.stage_source).reshape(self.params.horizon + 1, _STAGE)
         finite = bool(np.isfinite(x).all())
         extras = {
             "iterations": iterations,
@@ -639,17 +641,6 @@ class _Problem:
             _Plan(stages),
             extras,
         )
-
-    @cached_property
-    def _stage_source(self) -> NDArray[np.intp]:
-        """For each entry of the flattened stage table, its variable in the solver's order; stage
-        N, which has no accelerations, repeats stage N-1's."""
-        horizon = self.params.horizon
-        source = np.full((horizon + 1) * _STAGE, -1)
-        source[self.variable_index] = np.arange(len(self.variable_index))
-        table = source.reshape(horizon + 1, _STAGE)
-        table[-1, _ACCELERATIONS] = table[-2, _ACCELERATIONS]
-        return source
 
     def shift(self, plan: _Plan) -> _Plan:
         """The plan one stage later: stages move forward, the last one coasts for a stage."""
@@ -865,11 +856,7 @@ def _reference(route: Route, progress: float, params: NMPCParams) -> FloatArray:
     else:
         stop_time = math.sqrt(2.0 * remaining / deceleration)
     braking_start = stop_time - cruise / deceleration
-    points, cumulative = route.points.tolist(), route.cumulative.tolist()
-    last_segment = len(points) - 2
     half_deceleration, sample_time = 0.5 * deceleration, params.sample_time
-    segment = -1
-    start_x = start_y = start_s = tangent_x = tangent_y = 0.0
     rows: list[float] = []
     for stage in range(1, params.horizon + 1):
         elapsed = sample_time * stage
@@ -880,24 +867,8 @@ def _reference(route: Route, progress: float, params: NMPCParams) -> FloatArray:
             arc_length = length - (cruise * (braking_start - elapsed) + braking_distance)
         else:
             arc_length = length - half_deceleration * (to_stop * to_stop)
-        index = bisect_right(cumulative, arc_length) - 1
-        index = 0 if index < 0 else last_segment if index > last_segment else index
-        if index != segment:
-            segment = index
-            (start_x, start_y), (end_x, end_y) = points[segment], points[segment + 1]
-            dx, dy = end_x - start_x, end_y - start_y
-            norm = max(float(np.hypot(dx, dy)), 1e-12)
-            tangent_x, tangent_y = dx / norm, dy / norm
-            start_s = cumulative[segment]
-        along = arc_length - start_s
         speed = deceleration * to_stop
-        rows += (
-            start_x + along * tangent_x,
-            start_y + along * tangent_y,
-            tangent_x,
-            tangent_y,
-            cruise if cruise <= speed else speed,
-        )
+        rows += (*route.frame_at(arc_length), cruise if cruise <= speed else speed)
     return np.array(rows).reshape(-1, 5)
 
 
@@ -949,8 +920,8 @@ class _Obstacles:
             self.delta_x / np.where(self.delta_y != 0.0, self.delta_y, 1.0),
             0.0,
         )
-        low = np.array([p.min(axis=0) for p in polygons]).reshape(-1, 2)
-        high = np.array([p.max(axis=0) for p in polygons]).reshape(-1, 2)
+        boxes = np.array(floor.bounding_boxes).reshape(-1, 4)
+        low, high = boxes[:, :2], boxes[:, 2:]
         self.box_low = (low.T - _BOX_MARGIN)[:, None, :]
         """Shape (2, 1, C): each obstacle's bounding box's lower x and y less a margin, in m."""
         self.box_high = (high.T + _BOX_MARGIN)[:, None, :]

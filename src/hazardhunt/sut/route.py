@@ -32,14 +32,28 @@ class Route:
     """Shape (M, 2), M >= 2: the vertices, start first, goal last, in m."""
     cumulative: FloatArray = field(init=False, repr=False, compare=False)
     """Shape (M,): arc length at each vertex, in m."""
+    _arc_lengths: list[float] = field(init=False, repr=False, compare=False)
+    """``cumulative`` as Python floats, for scalar queries."""
+    _frames: tuple[tuple[float, float, float, float], ...] = field(
+        init=False, repr=False, compare=False
+    )
+    """Per segment its start point and unit direction (x, y, tangent x, tangent y)."""
 
     def __post_init__(self) -> None:
         points = np.asarray(self.points, dtype=np.float64)
         if points.ndim != 2 or points.shape[0] < 2 or points.shape[1] != 2:
             raise ValueError("a route needs at least two points (x, y)")
         segment_lengths = np.hypot(*np.diff(points, axis=0).T)
+        cumulative = np.concatenate([[0.0], np.cumsum(segment_lengths)])
+        frames = []
+        for (start_x, start_y), (end_x, end_y) in itertools.pairwise(points.tolist()):
+            dx, dy = end_x - start_x, end_y - start_y
+            norm = max(float(np.hypot(dx, dy)), 1e-12)
+            frames.append((start_x, start_y, dx / norm, dy / norm))
         object.__setattr__(self, "points", points)
-        object.__setattr__(self, "cumulative", np.concatenate([[0.0], np.cumsum(segment_lengths)]))
+        object.__setattr__(self, "cumulative", cumulative)
+        object.__setattr__(self, "_arc_lengths", cumulative.tolist())
+        object.__setattr__(self, "_frames", tuple(frames))
 
     @property
     def length(self) -> float:
@@ -51,29 +65,31 @@ class Route:
         """The last point."""
         return np.asarray(self.points[-1], dtype=np.float64)
 
-    def _segment_index(self, s: float) -> int:
-        index = int(np.searchsorted(self.cumulative, s, side="right")) - 1
-        return min(max(index, 0), len(self.points) - 2)
+    def frame_at(self, s: float) -> tuple[float, float, float, float]:
+        """The point at arc length s and the unit direction of its segment, as (x, y, tangent
+        x, tangent y); beyond either end, the end segment extended."""
+        index = bisect_right(self._arc_lengths, s) - 1
+        index = min(max(index, 0), len(self._frames) - 1)
+        start_x, start_y, tangent_x, tangent_y = self._frames[index]
+        along = s - self._arc_lengths[index]
+        return start_x + along * tangent_x, start_y + along * tangent_y, tangent_x, tangent_y
 
     def point_at(self, s: float) -> FloatArray:
         """The point at arc length s; beyond either end, the end segment extended."""
-        index = self._segment_index(s)
-        point = self.points[index] + (s - self.cumulative[index]) * self.tangent_at(s)
-        return np.asarray(point, dtype=np.float64)
+        x, y, _, _ = self.frame_at(s)
+        return np.array([x, y])
 
     def tangent_at(self, s: float) -> FloatArray:
         """Unit direction of the segment at arc length s."""
-        index = self._segment_index(s)
-        direction = self.points[index + 1] - self.points[index]
-        return np.asarray(direction / max(float(np.hypot(*direction)), 1e-12), dtype=np.float64)
+        _, _, tangent_x, tangent_y = self.frame_at(s)
+        return np.array([tangent_x, tangent_y])
 
     def project(self, point: FloatArray, s_min: float = 0.0, s_max: float = math.inf) -> float:
         """Arc length of the route point nearest to ``point``, searched within [s_min, s_max]."""
         best_s, best_distance = s_min, math.inf
-        cumulative = self.cumulative.tolist()
-        last_segment = len(cumulative) - 2
+        cumulative = self._arc_lengths
         x, y = float(point[0]), float(point[1])
-        for index in range(last_segment + 1):
+        for index in range(len(self._frames)):
             start_s, end_s = cumulative[index], cumulative[index + 1]
             if end_s < s_min or start_s > s_max:
                 continue
@@ -82,16 +98,8 @@ class Route:
             length = end_s - start_s
             t = float(np.dot(point - start, direction)) / max(length * length, 1e-12)
             s = min(max(start_s + t * length, max(start_s, s_min)), min(end_s, s_max))
-            # The distance to point_at(s), whose segment is the one holding s.
-            segment = bisect_right(cumulative, s) - 1
-            segment = 0 if segment < 0 else last_segment if segment > last_segment else segment
-            (start_x, start_y), (end_x, end_y) = self.points[segment : segment + 2].tolist()
-            dx, dy = end_x - start_x, end_y - start_y
-            norm = max(float(np.hypot(dx, dy)), 1e-12)
-            along = s - cumulative[segment]
-            distance = float(
-                np.hypot(start_x + along * (dx / norm) - x, start_y + along * (dy / norm) - y)
-            )
+            nearest_x, nearest_y, _, _ = self.frame_at(s)
+            distance = float(np.hypot(nearest_x - x, nearest_y - y))
             if distance < best_distance:
                 best_s, best_distance = s, distance
         return best_s

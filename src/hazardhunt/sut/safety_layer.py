@@ -31,17 +31,6 @@ _STATUSES = {
 """The four possible verdicts, built once: the layer answers at every physics step."""
 
 
-def field_diameter(setting: str) -> float | None:
-    """The protective-field diameter of a named setting, in m.
-
-    Raises:
-        ValueError: For a setting that is not one of ``FIELD_SETTINGS``.
-    """
-    if setting not in FIELD_SETTINGS:
-        raise ValueError(f"unknown field setting {setting!r}; choose one of {list(FIELD_SETTINGS)}")
-    return FIELD_SETTINGS[setting]
-
-
 @dataclass
 class LaserSafetyLayer:
     """Emergency stop on a half-disc protective field of ``diameter`` metres (None: no field),

@@ -47,16 +47,12 @@ class FloorMap:
         init=False, repr=False, compare=False
     )
     """Per obstacle (x min, y min, x max, y max), in m."""
-    _edge_lists: tuple[tuple[tuple[float, ...], ...], ...] = field(
+    _segments: tuple[tuple[tuple[int, float, float, float, float, float, float], ...], ...] = field(
         init=False, repr=False, compare=False
     )
-    """Per obstacle its edges as (start x, start y, end x, end y), Python floats for scalar
+    """Per obstacle its edges as (index into ``edges``, start x, start y, end y, direction x,
+    direction y, squared length or 1 for a zero-length edge), Python floats for scalar
     queries."""
-    _segments: tuple[tuple[tuple[int, float, float, float, float, float], ...], ...] = field(
-        init=False, repr=False, compare=False
-    )
-    """Per obstacle its edges as (index into ``edges``, start x, start y, direction x, direction
-    y, squared length or 1 for a zero-length edge), Python floats for scalar queries."""
 
     def __post_init__(self) -> None:
         polygons = [o.polygon for o in self.obstacles]
@@ -70,18 +66,12 @@ class FloorMap:
             for p in polygons
         )
         object.__setattr__(self, "bounding_boxes", boxes)
-        edge_lists = tuple(
-            tuple(
-                (float(a[0]), float(a[1]), float(b[0]), float(b[1]))
-                for a, b in zip(p, np.roll(p, -1, axis=0), strict=True)
-            )
-            for p in polygons
-        )
-        object.__setattr__(self, "_edge_lists", edge_lists)
         start = self.edges[:, 0, :]
         direction = self.edges[:, 1, :] - start
         length_sq = np.einsum("ij,ij->i", direction, direction)
-        rows = np.column_stack([start, direction, np.where(length_sq > 0, length_sq, 1.0)])
+        rows = np.column_stack(
+            [start, self.edges[:, 1, 1], direction, np.where(length_sq > 0, length_sq, 1.0)]
+        )
         rows_list = rows.tolist()
         segments = tuple(
             tuple(
@@ -149,7 +139,7 @@ class FloorMap:
         for box_distance_sq, owner in by_box:
             if box_distance_sq > (best + margin) ** 2:
                 break
-            for index, start_x, start_y, dx, dy, length_sq in self._segments[owner]:
+            for index, start_x, start_y, _, dx, dy, length_sq in self._segments[owner]:
                 offset_x, offset_y = x - start_x, y - start_y
                 t = (offset_x * dx + offset_y * dy) / length_sq
                 t = min(max(t, 0.0), 1.0)
@@ -176,7 +166,7 @@ class FloorMap:
             return True
         limit = radius * radius
         for (x_min, y_min, x_max, y_max), edges in zip(
-            self.bounding_boxes, self._edge_lists, strict=True
+            self.bounding_boxes, self._segments, strict=True
         ):
             # A disc at least ``radius`` from an obstacle's bounding box is at least that far
             # from the obstacle and outside it: most queries end here.
@@ -203,13 +193,11 @@ def _disc_meets_polygon(
 ) -> bool:
     """Whether a disc comes closer than ``radius`` to a polygon's boundary or has its centre
     strictly inside (even-odd rule); the arithmetic of ``distances_to_segments`` and
-    ``inside_obstacle`` for one point and one polygon."""
+    ``inside_obstacle`` for one point and the polygon's ``FloorMap._segments``."""
     inside = False
-    for start_x, start_y, end_x, end_y in edges:
-        dx, dy = end_x - start_x, end_y - start_y
-        length_sq = dx * dx + dy * dy
+    for _, start_x, start_y, end_y, dx, dy, length_sq in edges:
         ox, oy = x - start_x, y - start_y
-        t = (ox * dx + oy * dy) / (length_sq if length_sq > 0 else 1.0)
+        t = (ox * dx + oy * dy) / length_sq
         t = min(max(t, 0.0), 1.0)
         gx, gy = ox - t * dx, oy - t * dy
         if math.sqrt(gx * gx + gy * gy) < radius:
