@@ -1,6 +1,6 @@
 """Resident memory of one worker along a long run: does it grow with the number of episodes?
 
-Executes one real run (``execute_run``, what ``hazardhunt run`` and a campaign worker do) in a
+Executes one real run (``record_run``, what ``hazardhunt run`` and a campaign worker do) in a
 fresh process and samples its resident set size every ``--every`` episodes. Reports the
 memory after warm-up, at the end, the growth per 1,000 episodes fitted over the second half
 of the run, and that growth extrapolated to a 20,000-episode run. Prints a table and writes
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import RunProgress, execute_run
+from hazardhunt.campaign.run import RunProgress, record_run
 
 _PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -44,7 +44,7 @@ def sample_run(config: RunConfig, every: int) -> list[tuple[int, float]]:
             samples.append((state.episodes_done, resident_mib()))
 
     with tempfile.TemporaryDirectory() as folder:
-        execute_run(config, Path(folder) / "run", progress)
+        record_run(config, Path(folder) / "run", progress)
     return samples
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.nmpc import NMPCController, NMPCParams
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
@@ -46,21 +46,20 @@ def run_solver(solver: str, episodes: int, field: str, seed: int) -> dict[str, A
     outcomes: dict[str, int] = {}
     started = time.perf_counter()
     for scenario in BUILTIN_SCENARIOS:
-        env = AGVEnv(scenario, field, controller=controller, record_trajectory=True)
+        simulation = Simulation.build(scenario, field, controller=controller)
         rng = np.random.default_rng(seed)
-        for episode in range(episodes):
-            env.reset(seed=seed + episode)
-            done = False
-            while not done:
-                action = rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
-                _, _, terminated, truncated, info = env.step(action)
-                done = terminated or truncated
-            summary = info["summary"]
-            outcomes[summary["outcome"]] = outcomes.get(summary["outcome"], 0) + 1
-            solve_times += [row["solve_time_s"] for row in env.trajectory()[:-1]]
-            failed += summary["failed_commands"]
-            decisions += summary["decision_steps"]
-            physics_steps += round(summary["sim_time"] / env.physics_step)
+
+        def uniform(_: Simulation, rng: np.random.Generator = rng) -> np.ndarray:
+            return rng.uniform(-1.0, 1.0, size=2)
+
+        for _ in range(episodes):
+            result = simulation.simulate(uniform)
+            summary = result.summary
+            outcomes[str(summary.outcome)] = outcomes.get(str(summary.outcome), 0) + 1
+            solve_times += [row.solve_time_s for row in (result.trajectory or ())[:-1]]
+            failed += summary.controller_failures
+            decisions += summary.decision_steps
+            physics_steps += round(summary.sim_time / simulation.physics_step)
             episode_count += 1
     wall = time.perf_counter() - started
     times_ms = 1e3 * np.array([t for t in solve_times if t > 0.0])

@@ -22,13 +22,13 @@ from typing import Any
 import pandas as pd
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import execute_run
+from hazardhunt.campaign.run import record_run
 
 
 def one_run(config: RunConfig) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as scratch:
         directory = Path(scratch) / "run"
-        summary = execute_run(config, directory)
+        summary = record_run(config, directory)
         episodes = pd.read_parquet(directory / "episodes.parquet")
     size = max(len(episodes) // 4, 1)
     quarters = [

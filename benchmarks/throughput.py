@@ -1,6 +1,6 @@
 """Throughput of real runs per tester and scenario, and the NMPC's solve times per solver.
 
-Each run is ``execute_run`` (what ``hazardhunt run`` does) in a fresh process, one at a time, so
+Each run is ``record_run`` (what ``hazardhunt run`` does) in a fresh process, one at a time, so
 that its peak memory is its own and nothing else competes for the cores. For every run: episodes
 and env steps per second, the share of wall time spent outside the NMPC solver's call
 (overhead), the share spent outside the controller altogether (its solver call and the Python
@@ -26,7 +26,7 @@ from typing import Any
 import pandas as pd
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import RunProgress, execute_run
+from hazardhunt.campaign.run import RunProgress, record_run
 from hazardhunt.sut.nmpc import NMPCController
 from hazardhunt.testers import TESTER_NAMES
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
@@ -57,12 +57,12 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as folder:
         started = time.perf_counter()
         directory = Path(folder) / "run"
-        summary = execute_run(config, directory, progress)
+        summary = record_run(config, directory, progress)
         ended = time.perf_counter()
         wall = ended - started
         episodes = pd.read_parquet(directory / "episodes.parquet")
         physics_step = json.loads((directory / "config.json").read_text())["physics_step"]
-    solve_per_episode = episodes["solves"] * episodes["solve_time_mean_s"]
+    solve_per_episode = episodes["controller_calls"] * episodes["solve_time_mean_s"]
     solve_s = float(solve_per_episode.sum())
     steady_wall = ended - first["time"]
     steady_solve_s = float(solve_per_episode.iloc[1:].sum())
@@ -77,7 +77,7 @@ def measure_run(config: RunConfig) -> dict[str, Any]:
         "episodes_per_s": summary["episodes"] / wall,
         "decision_steps_per_s": float(episodes["decision_steps"].sum()) / wall,
         "physics_steps_per_s": float((episodes["sim_time"] / physics_step).sum()) / wall,
-        "solves": int(episodes["solves"].sum()),
+        "solves": int(episodes["controller_calls"].sum()),
         "solve_s": solve_s,
         "overhead_share": 1.0 - solve_s / wall,
         "controller_s": controller_s[0],

@@ -20,10 +20,12 @@ from matplotlib.figure import Figure
 
 from hazardhunt.env.rendering import draw_human, draw_robot
 from hazardhunt.spec.failure_classes import MechanismClassifier
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.world.bodies import HumanParams, RobotParams
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "images" / "classes"
-FIELD = 1.25
+FIELD = FIELD_SETTINGS["1.25m"]
+NO_FIELD = FIELD_SETTINGS["none"]
 """Field diameter drawn for the classes with a field, in m."""
 
 Point = tuple[float, float]
@@ -111,7 +113,7 @@ SKETCHES: dict[str, Sketch] = {
 
 def draw_sketch(ax: Axes, sketch: Sketch, robot: RobotParams, human: HumanParams) -> None:
     """The robot, its field, the human at contact, the paths and the stop marker."""
-    draw_robot(ax, (0.0, 0.0, 0.0), robot, FIELD if sketch.field else None, sketch.braking)
+    draw_robot(ax, (0.0, 0.0, 0.0), robot, FIELD if sketch.field else NO_FIELD, sketch.braking)
     contact = sketch.path[-1]
     before = sketch.path[-2] if len(sketch.path) > 1 else (0.0, 0.0)
     heading = math.atan2(contact[1] - before[1], contact[0] - before[0])
@@ -162,7 +164,7 @@ def write_picture(name: str, sketch: Sketch, out: Path) -> Path:
 
 def main() -> None:
     classifier = MechanismClassifier()
-    names = dict.fromkeys((*classifier.classes_for(FIELD), *classifier.classes_for(None)))
+    names = dict.fromkeys((*classifier.classes_for(FIELD), *classifier.classes_for(NO_FIELD)))
     missing = set(names) - set(SKETCHES)
     if missing:
         raise SystemExit(f"no sketch for {sorted(missing)}")

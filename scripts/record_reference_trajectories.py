@@ -3,7 +3,8 @@
 Replays the recorded failures of ``tests/spec/recorded_failures.json`` and a few episodes of
 seeded random actions on every built-in scenario and field setting, and stores per episode the
 actions and, at every control instant, the robot's and the human's state. Run it with the code
-whose behaviour is the reference (hazardhunt before its speed optimisations, commit d2cb541);
+whose behaviour is the reference (hazardhunt before its speed optimisations, commit d2cb541,
+whose ``episode`` played the same actions through the Gymnasium env's step loop);
 ``tests/sut/test_reference_trajectories.py`` checks today's code against the file.
 
     python scripts/record_reference_trajectories.py --out tests/sut/reference_trajectories.npz
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 
 COLUMNS = ("time", "robot_x", "robot_y", "robot_heading", "robot_speed", "human_x", "human_y")
 """Trajectory columns stored, at every control instant."""
@@ -31,14 +32,9 @@ RANDOM_EPISODES = [
 
 def episode(scenario: str, field: str, decision_period: float, actions: np.ndarray) -> np.ndarray:
     """The trajectory of one episode driven by ``actions`` (the first ones until it ends)."""
-    env = AGVEnv(scenario, field, decision_period=decision_period, measure_time=False)
-    env.reset(seed=0)
-    for action in actions:
-        _, _, terminated, truncated, _ = env.step(np.asarray(action, dtype=np.float32))
-        if terminated or truncated:
-            break
-    rows = env.trajectory()
-    return np.array([[row[c] for c in COLUMNS] for row in rows], dtype=np.float64)
+    simulation = Simulation.build(scenario, field, decision_period)
+    rows = simulation.simulate(np.asarray(actions, dtype=np.float32)).trajectory or ()
+    return np.array([[getattr(row, c) for c in COLUMNS] for row in rows], dtype=np.float64)
 
 
 def main() -> None:

@@ -21,14 +21,9 @@ import math
 
 import numpy as np
 
-from hazardhunt.sut.protocols import ControlCommand, RobotState, TrackedHuman
+from hazardhunt.sut.protocols import ControlCommand, RobotParams, RobotState, TrackedHuman
 from hazardhunt.sut.route import Route
 from hazardhunt.world.floor import FloorMap
-
-ROBOT_LENGTH = 0.64
-"""The built-in robot's length, in m: the front face is half of it ahead of the centre."""
-ROBOT_WIDTH = 0.5
-"""The built-in robot's width, in m."""
 
 
 class CautiousPursuit:
@@ -49,11 +44,13 @@ class CautiousPursuit:
         self.max_yaw_rate = max_yaw_rate
         self.control_period = 0.2  # seconds between two calls
         self._route: Route | None = None
+        self._robot = RobotParams()
         self._progress = 0.0
 
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState) -> None:
-        """A new episode: remember the route and where the robot is on it."""
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        """A new episode: remember the route, the robot's size and where it is on the route."""
         self._route = route
+        self._robot = params
         self._progress = route.project(np.array([robot.x, robot.y]))
 
     def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
@@ -83,5 +80,5 @@ class CautiousPursuit:
         dx, dy = float(human.position[0]) - robot.x, float(human.position[1]) - robot.y
         forward = dx * math.cos(robot.heading) + dy * math.sin(robot.heading)
         left = -dx * math.sin(robot.heading) + dy * math.cos(robot.heading)
-        ahead = forward - ROBOT_LENGTH / 2
-        return 0.0 <= ahead <= self.stop_distance and abs(left) <= ROBOT_WIDTH
+        ahead = forward - self._robot.length / 2
+        return 0.0 <= ahead <= self.stop_distance and abs(left) <= self._robot.width

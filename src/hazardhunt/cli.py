@@ -24,7 +24,6 @@ from hazardhunt.campaign.config import ConfigError
 
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import PluginSpec
-from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
 app = typer.Typer(
@@ -44,47 +43,56 @@ def main() -> None:
 
 @app.command()
 def scenarios(
+    names: Annotated[
+        list[str] | None,
+        typer.Argument(
+            help="Scenarios to draw: built-in names or scenario files (default: all built-in ones)."
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Directory for the pictures.")] = Path("scenarios"),
-    field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")] = "1.25m",
+    field: Annotated[
+        str, typer.Option(help="Protective field: none, 1.25m, 2m or one the scenario defines.")
+    ] = "1.25m",
     seed: Annotated[int, typer.Option(help="Seed of the random human.")] = 0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
 ) -> None:
-    """Simulate one episode per built-in scenario with a random human and draw each."""
-    from hazardhunt.env.agv import AGVEnv
+    """Simulate one episode per scenario with a random human and draw each."""
     from hazardhunt.env.rendering import plot_episode
+    from hazardhunt.sim.simulation import Simulation
 
-    if field not in FIELD_SETTINGS:
-        raise typer.BadParameter(f"choose one of {', '.join(FIELD_SETTINGS)}", param_hint="--field")
-    table = Table("scenario", "outcome", "sim time (s)", "min clearance (m)", "e-stops", "picture")
+    chosen = names or list(BUILTIN_SCENARIOS)
+    table = Table(
+        "scenario", "outcome", "sim time (s)", "min clearance (m)", "emergency stops", "picture"
+    )
     rng = np.random.default_rng(seed)
     with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("simulating", total=len(BUILTIN_SCENARIOS))
-        for name in BUILTIN_SCENARIOS:
+        task = progress.add_task("simulating", total=len(chosen))
+        for name in chosen:
             progress.update(task, description=f"simulating {name}")
-            env = AGVEnv(name, field, solver=solver)
-            env.reset(seed=seed)
-            info: dict[str, object] = {}
-            done = False
-            while not done:
-                action = rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
-                _, _, terminated, truncated, info = env.step(action)
-                done = terminated or truncated
-            outcome = str(info["outcome"])
+            try:
+                simulation = Simulation.build(name, field, solver=solver)
+            except ScenarioError:
+                raise
+            except ValueError as error:
+                raise typer.BadParameter(str(error), param_hint="--field") from None
+            result = simulation.simulate(lambda _: rng.uniform(-1.0, 1.0, size=2))
+            summary = result.summary
+            stem = Path(name).stem
             picture = plot_episode(
-                out / f"{name}.png",
-                env.scenario,
-                env.route,
-                env.trajectory(),
-                env.field_diameter,
-                title=f"{name}, field {field}: {outcome} at {info['sim_time']:.1f} s",
-                outcome=outcome,
+                out / f"{stem}.png",
+                simulation.scenario,
+                simulation.route,
+                result.trajectory or (),
+                simulation.field,
+                title=f"{stem}, field {field}: {summary.outcome} at {summary.sim_time:.1f} s",
+                outcome=summary.outcome,
             )
             table.add_row(
-                name,
-                outcome,
-                f"{info['sim_time']:.1f}",
-                f"{info['min_clearance']:.2f}",
-                str(info["estop_count"]),
+                stem,
+                str(summary.outcome),
+                f"{summary.sim_time:.1f}",
+                f"{summary.min_clearance:.2f}",
+                str(summary.emergency_stops),
                 str(picture),
             )
             progress.advance(task)
@@ -141,7 +149,7 @@ def run_command(
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
     from hazardhunt.campaign.config import EnvOptions, RunConfig
-    from hazardhunt.campaign.runner import run_into
+    from hazardhunt.campaign.run import execute_run
 
     config = _validated(
         lambda: RunConfig(
@@ -156,7 +164,7 @@ def run_command(
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
         )
     )
-    summary = run_into(config, out, console=err_console)
+    summary = execute_run(config, out, console=err_console)
     if json_output:
         print(json.dumps(summary))
     else:
@@ -196,25 +204,27 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
 @app.command()
 def replay(
     run_directory: Annotated[Path, typer.Argument(help="A run directory.")],
-    failure: Annotated[int, typer.Option(help="The failure's id (its episode index).")],
+    episode: Annotated[
+        int, typer.Option(help="The episode of the failure, as the run numbers it.")
+    ],
     gif: Annotated[Path | None, typer.Option(help="Write an animation of the replay.")] = None,
 ) -> None:
     """Re-simulate a recorded failure and confirm it ends the same way at the same time."""
     from hazardhunt.campaign.replay import replay_failure
 
-    result = replay_failure(run_directory, failure)
-    verdict = "[green]reproduced[/green]" if result.matches else "[red]NOT reproduced[/red]"
+    replay = replay_failure(run_directory, episode)
+    verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
     console.print(
-        f"failure {failure}: recorded {result.recorded_outcome} at "
-        f"{result.recorded_sim_time:.2f} s, replayed {result.replayed_outcome} at "
-        f"{result.replayed_sim_time:.2f} s: {verdict}"
+        f"episode {episode}: recorded {replay.recorded_outcome} at "
+        f"{replay.recorded_sim_time:.2f} s, replayed {replay.result.outcome} at "
+        f"{replay.result.summary.sim_time:.2f} s: {verdict}"
     )
     if gif is not None:
         from hazardhunt.env.rendering import animate_episode
 
-        animate_episode(gif, result.env, title=f"failure {failure}")
+        animate_episode(gif, replay.simulation, title=f"episode {episode}")
         console.print(f"animation written to [bold]{gif}[/bold]")
-    if not result.matches:
+    if not replay.matches:
         raise typer.Exit(1)
 
 

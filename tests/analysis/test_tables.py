@@ -1,5 +1,6 @@
 """The report's tables on small hand-made results, checked against hand-computed values."""
 
+import dataclasses
 import math
 
 import pandas as pd
@@ -7,7 +8,9 @@ import pytest
 
 from hazardhunt.analysis import tables
 from hazardhunt.analysis.results import Results
+from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.reward_hacking import LoiteringRule
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 
 
 def runs(rows):
@@ -23,6 +26,7 @@ def runs(rows):
                 "failures": k,
                 "episodes": 100,
                 "wall_time_s": rest[0] if rest else 10.0,
+                "field_shape": dataclasses.asdict(FIELD_SETTINGS[f]),
             }
             for s, f, t, seed, k, *rest in rows
         ]
@@ -139,8 +143,8 @@ def test_reward_hacking_measures_time_in_field_stops_and_loitering_per_tester():
             "tester": "ppo-acc",
             "outcome": ["stall", "timeout", "failure", "goal"],
             "time_in_field": [10.0, 4.0, 0.0, 2.0],
-            "estop_count": [1, 3, 0, 0],
-            "return": [20.0, 10.0, 1.0, 0.0],
+            "emergency_stops": [1, 3, 0, 0],
+            "risk_sum": [20.0, 10.0, 1.0, 0.0],
             "loitering": [True, True, False, False],
         }
     )
@@ -148,7 +152,7 @@ def test_reward_hacking_measures_time_in_field_stops_and_loitering_per_tester():
     assert row["time in field per episode (s)"] == 4.0
     assert row["emergency stops per episode"] == 1.0
     assert (row["stall share"], row["timeout share"]) == (0.25, 0.25)
-    assert row["return without failure"] == 10.0
+    assert row["risk sum without failure"] == 10.0
     assert (row["loitering episodes"], row["loitering share"]) == (2, 0.5)
 
 
@@ -163,22 +167,22 @@ def test_reward_hacking_measures_time_in_field_stops_and_loitering_per_tester():
     ],
 )
 def test_the_loitering_rule(outcome, stops, in_field, loiters):
-    summary = {"outcome": outcome, "estop_count": stops, "time_in_field": in_field}
+    summary = EpisodeSummary(outcome, emergency_stops=stops, time_in_field=in_field)
     assert LoiteringRule().matches(summary) is loiters
 
 
 def test_the_representative_of_a_class_has_its_median_time_to_contact():
     failures = pd.DataFrame(
-        {"class": ["a", "a", "a", "b"], "sim_time": [1.0, 5.0, 9.5, 3.0], "failure_id": range(4)}
+        {"class": ["a", "a", "a", "b"], "sim_time": [1.0, 5.0, 9.5, 3.0], "episode": range(4)}
     )
     chosen = tables.representatives(failures).set_index("class")
-    assert chosen.loc["a", "failure_id"] == 1
-    assert chosen.loc["b", "failure_id"] == 3
+    assert chosen.loc["a", "episode"] == 1
+    assert chosen.loc["b", "episode"] == 3
 
 
 def test_the_typical_loitering_episode_is_the_one_nearest_the_median():
     loitering = pd.DataFrame(
-        {"episode": [0, 1, 2], "time_in_field": [2.0, 6.0, 30.0], "estop_count": [2, 4, 9]}
+        {"episode": [0, 1, 2], "time_in_field": [2.0, 6.0, 30.0], "emergency_stops": [2, 4, 9]}
     )
     assert tables.typical_loitering(loitering)["episode"] == 1
     assert tables.typical_loitering(loitering.iloc[0:0]) is None
@@ -202,7 +206,7 @@ def test_lesson_2_compares_classes_found_case_by_case_and_counts_the_studys_tabl
 def test_failures_per_class_counts_each_testers_failures_of_each_class():
     failures = pd.DataFrame(
         {
-            "failure_id": range(4),
+            "episode": range(4),
             "tester": ["random", "ppo-max", "ppo-max", "ppo-max"],
             "class": ["left/moving", "left/moving", "left/moving", "front/moving"],
         }

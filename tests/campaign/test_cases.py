@@ -131,7 +131,7 @@ def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):
     (tmp_path / "crashing.py").write_text(
         "class Crashing:\n"
         "    control_period = 0.2\n"
-        "    def reset(self, floor, route, robot):\n"
+        "    def reset(self, floor, route, robot, params):\n"
         "        pass\n"
         "    def control(self, time, robot, human):\n"
         "        raise RuntimeError('no route')\n"

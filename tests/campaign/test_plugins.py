@@ -30,7 +30,7 @@ RAISING = """
     class Raising:
         control_period = 0.2
 
-        def reset(self, floor, route, robot):
+        def reset(self, floor, route, robot, params):
             pass
 
         def control(self, time, robot, human):
@@ -61,8 +61,8 @@ def test_the_example_controller_from_the_command_line_fails_within_a_few_hundred
     assert config["run"]["controller"]["path"] == CONTROLLER
     assert config["run"]["controller"]["params"] == {"stop_distance": 1.0}
     # Its failures replay exactly: the run loads the plug-in again.
-    failure = int(pd.read_parquet(out / "failures.parquet")["failure_id"].iloc[0])
-    replayed = hazardhunt("replay", out, "--failure", failure, cwd=EXAMPLE)
+    failure = int(pd.read_parquet(out / "failures.parquet")["episode"].iloc[0])
+    replayed = hazardhunt("replay", out, "--episode", failure, cwd=EXAMPLE)
     assert replayed.returncode == 0, replayed.stderr
     assert "reproduced" in replayed.stdout
 
@@ -135,7 +135,7 @@ def test_the_laser_field_with_side_bands_loads_as_a_safety_layer():
     layer = build_safety_layer(
         "hazardhunt.sut.safety_layer:LaserSafetyLayer", {"diameter": 1.25, "side_margin": 0.4}
     )
-    assert layer.side_margin == 0.4
+    assert layer.field.side_margin == 0.4
     with pytest.raises(PluginError, match="does not satisfy the SafetyLayer protocol"):
         build_safety_layer("hazardhunt.sut.route:Route", {"points": [[0, 0], [1, 0]]})
 

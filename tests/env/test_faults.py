@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.protocols import ControlCommand
 from hazardhunt.sut.pursuit import PursuitController
 from tests.scripted import run, stand_still
@@ -16,8 +16,8 @@ class FailingAfter:
         self.inner, self.start, self.stop, self.raise_error = controller, start, stop, raise_error
         self.control_period = controller.control_period
 
-    def reset(self, floor, route, robot):
-        self.inner.reset(floor, route, robot)
+    def reset(self, floor, route, robot, params):
+        self.inner.reset(floor, route, robot, params)
 
     def control(self, time, robot, human):
         command = self.inner.control(time, robot, human)
@@ -28,41 +28,43 @@ class FailingAfter:
         return command
 
 
-def far_away_human_env(controller, **kwargs):
-    return AGVEnv("crossing", "none", controller=controller, decision_period=0.2, **kwargs)
+def far_away_human(controller, **kwargs):
+    return Simulation.build(
+        "crossing", "none", controller=controller, decision_period=0.2, **kwargs
+    )
 
 
 def test_a_short_solver_failure_brakes_and_the_episode_goes_on():
-    env = far_away_human_env(FailingAfter(PursuitController(), start=3.0, stop=3.6))
-    info, _ = run(env, stand_still)
-    assert info["outcome"] == "goal"
-    rows = env.trajectory()
-    failed = [row for row in rows if row["controller_failed"]]
-    assert [round(row["time"], 2) for row in failed] == [3.0, 3.2, 3.4]
-    assert {row["controller_status"] for row in failed} == {"Infeasible"}
-    speeds = {round(row["time"], 2): row["robot_speed"] for row in rows}
+    sim = far_away_human(FailingAfter(PursuitController(), start=3.0, stop=3.6))
+    result = run(sim, stand_still)
+    assert result.outcome == "goal"
+    rows = sim.trajectory()
+    failed = [row for row in rows if row.controller_failed]
+    assert [round(row.time, 2) for row in failed] == [3.0, 3.2, 3.4]
+    assert {row.controller_status for row in failed} == {"Infeasible"}
+    speeds = {round(row.time, 2): row.robot_speed for row in rows}
     # The failed commands brake at 1 m/s^2 despite asking for 1 m/s.
     assert speeds[3.6] == pytest.approx(speeds[3.0] - 0.6, abs=1e-9)
-    assert info["summary"]["failed_commands"] == 3
+    assert result.summary.controller_failures == 3
 
 
 def test_a_persistent_solver_failure_ends_as_sut_error():
-    env = far_away_human_env(FailingAfter(PursuitController(), start=2.0), max_failed_commands=5)
-    info, _ = run(env, stand_still)
-    assert info["outcome"] == "sut_error"
-    assert info["sim_time"] == pytest.approx(2.8 + 0.05)
+    sim = far_away_human(FailingAfter(PursuitController(), start=2.0), max_failed_commands=5)
+    result = run(sim, stand_still)
+    assert result.outcome == "sut_error"
+    assert result.summary.sim_time == pytest.approx(2.8 + 0.05)
 
 
 def test_a_controller_that_raises_ends_as_sut_error_with_the_error_recorded():
-    env = far_away_human_env(FailingAfter(PursuitController(), start=1.0, raise_error=True))
-    info, _ = run(env, stand_still)
-    assert info["outcome"] == "sut_error"
-    assert info["summary"]["controller_errors"] == ["RuntimeError: controller crashed"]
-    assert env.trajectory()[-1]["controller_status"] == "raised RuntimeError"
+    sim = far_away_human(FailingAfter(PursuitController(), start=1.0, raise_error=True))
+    result = run(sim, stand_still)
+    assert result.outcome == "sut_error"
+    assert list(result.summary.controller_errors) == ["RuntimeError: controller crashed"]
+    assert sim.trajectory()[-1].controller_status == "raised RuntimeError"
 
 
 def test_stepping_after_the_end_asks_for_a_reset():
-    env = far_away_human_env(PursuitController())
-    run(env, stand_still)
+    sim = far_away_human(PursuitController())
+    run(sim, stand_still)
     with pytest.raises(RuntimeError, match="call reset"):
-        env.step(np.zeros(2, dtype=np.float32))
+        sim.decide(np.zeros(2, dtype=np.float32))

@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
+from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     OTHER,
     FailureClassifier,
@@ -13,30 +14,31 @@ from hazardhunt.spec.failure_classes import (
     classify_failures,
 )
 from hazardhunt.sut.nmpc import NMPCController
-from hazardhunt.world.bodies import HumanParams, RobotParams
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.world.bodies import HumanParams, RobotParams, RobotState
 from hazardhunt.world.kinematics import step_robot
 from hazardhunt.world.scenario import Pose, load_scenario
 from tests.scripted import Policy, keep_heading, lie_in_wait, run, steer_towards, walk_to
 
 CLASSIFIER = MechanismClassifier()
-FIELD = 1.25
+FIELD = FIELD_SETTINGS["1.25m"]
+NO_FIELD = FIELD_SETTINGS["none"]
 
 
 def sample(time, human, *, robot_speed=1.0, stop=False, in_field=False):
-    """One trajectory row; the robot stands at the origin facing +x, so world = robot frame."""
-    return {
-        "time": time,
-        "human_x": human[0],
-        "human_y": human[1],
-        "human_heading": 0.0,
-        "robot_x": 0.0,
-        "robot_y": 0.0,
-        "robot_heading": 0.0,
-        "robot_speed": robot_speed,
-        "emergency_stop": stop,
-        "human_in_field": in_field,
-        "clearance": 0.0,
-    }
+    """One trajectory sample; the robot stands at the origin facing +x, so world = robot frame."""
+    return TrajectorySample(
+        time=time,
+        human_x=human[0],
+        human_y=human[1],
+        human_heading=0.0,
+        robot_x=0.0,
+        robot_y=0.0,
+        robot_heading=0.0,
+        robot_speed=robot_speed,
+        emergency_stop=stop,
+        human_in_field=in_field,
+    )
 
 
 def contact(face, *, moving=True, **kwargs):
@@ -48,7 +50,7 @@ def contact(face, *, moving=True, **kwargs):
 
 
 def classify(rows, face, field=FIELD):
-    return CLASSIFIER.classify(rows, {"outcome": "failure", "contact_face": face}, field)
+    return CLASSIFIER.classify(rows, EpisodeSummary("failure", contact_face=face), field)
 
 
 def far_away(count=5, **kwargs):
@@ -60,7 +62,7 @@ def far_away(count=5, **kwargs):
 def test_without_a_field_the_class_is_the_face_and_the_humans_motion(face, moving):
     rows = far_away() + contact(face, moving=moving)
     motion = "moving" if moving else "standing"
-    assert classify(rows, face, field=None) == f"{face}/{motion}"
+    assert classify(rows, face, field=NO_FIELD) == f"{face}/{motion}"
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
@@ -115,7 +117,7 @@ def test_entering_the_field_from_beside_the_robot_is_edge_entry(moving):
 def test_the_last_entry_into_the_field_decides_edge_entry():
     beside = [sample(1.6, (0.3, 0.9)), sample(1.8, (0.3, 0.6), stop=True, in_field=True)]
     rows = far_away() + entered_ahead() + [sample(1.4, (3.0, 3.0))] + beside + contact("left")
-    rows[-1]["emergency_stop"] = True
+    rows[-1] = dataclasses.replace(rows[-1], emergency_stop=True)
     assert classify(rows, "left") == "edge-entry/moving"
 
 
@@ -135,7 +137,7 @@ def test_a_failure_that_fits_no_class_is_other_not_dropped(rows, face):
 
 def test_the_classes_match_the_field_setting_and_other_comes_last():
     with_field = CLASSIFIER.classes_for(FIELD)
-    without_field = CLASSIFIER.classes_for(None)
+    without_field = CLASSIFIER.classes_for(NO_FIELD)
     assert len(with_field) == 10 + 1
     assert len(without_field) == 8 + 1
     assert with_field[-1] == without_field[-1] == OTHER
@@ -146,9 +148,9 @@ def test_the_classes_match_the_field_setting_and_other_comes_last():
 def test_classify_failures_keeps_every_episode():
     trajectories = {0: far_away() + contact("left"), 1: far_away() + contact("front"), 2: []}
     summaries = {
-        0: {"contact_face": "left"},
-        1: {"contact_face": "front"},
-        2: {"contact_face": None},
+        0: EpisodeSummary("failure", contact_face="left"),
+        1: EpisodeSummary("failure", contact_face="front"),
+        2: EpisodeSummary("failure"),
     }
     classes = classify_failures(trajectories, summaries, FIELD)
     assert classes == {0: "side-left/no-stop", 1: OTHER, 2: OTHER}
@@ -168,15 +170,15 @@ SIDES = {"left": 1.0, "right": -1.0}
 
 
 def classify_episode(field, policy, side="right"):
-    """Play one episode in the crossing; returns the failure's class and the env."""
-    env = AGVEnv(
+    """Play one episode in the crossing; returns the failure's class and the sim."""
+    sim = Simulation.build(
         FROM_THE_NORTH if side == "left" else CROSSING, field, controller=NMPC, decision_period=0.2
     )
-    info, _ = run(env, policy)
-    assert info["outcome"] == "failure"
-    label = CLASSIFIER.classify(env.trajectory(), info["summary"], env.field_diameter)
-    assert label in CLASSIFIER.classes_for(env.field_diameter)
-    return label, env
+    result = run(sim, policy)
+    assert result.outcome == "failure"
+    label = CLASSIFIER.classify(sim.trajectory(), result.summary, sim.field)
+    assert label in CLASSIFIER.classes_for(sim.field)
+    return label, sim
 
 
 def beside_route(side, x, offset):
@@ -191,13 +193,13 @@ def towards_route(side):
 
 def robot_past(x):
     """Trigger: the robot's centre has passed ``x``."""
-    return lambda env: env.robot_state.x > x
+    return lambda sim: sim.robot.x > x
 
 
-def charge(env):
+def charge(sim):
     """Run at the robot's centre."""
-    robot = env.robot_state
-    return steer_towards(env, (robot.x, robot.y), 1.5)
+    robot = sim.robot
+    return steer_towards(sim, (robot.x, robot.y), 1.5)
 
 
 def side_attack(side) -> Policy:
@@ -215,7 +217,7 @@ def graze_the_field(side) -> Policy:
         beside_route(side, 9.95, 1.2),
         heading,
         robot_past(9.95 - 1.5),
-        lambda env: keep_heading(env, heading, 1.1),
+        lambda sim: keep_heading(sim, heading, 1.1),
     )
 
 
@@ -228,7 +230,7 @@ def cut_in_behind_the_front_corner() -> Policy:
         (9.728, ROUTE_Y - 1.0),
         heading,
         robot_past(9.728),
-        lambda env: keep_heading(env, heading, 1.5),
+        lambda sim: keep_heading(sim, heading, 1.5),
     )
 
 
@@ -240,7 +242,7 @@ def step_into_the_path(side, x, offset) -> Policy:
         beside_route(side, x, 1.4),
         towards_route(side),
         robot_past(8.0),
-        lambda env: walk_to(env, target),
+        lambda sim: walk_to(sim, target),
     )
 
 
@@ -252,9 +254,9 @@ def chase_the_rear() -> Policy:
 
 @pytest.mark.parametrize("side", list(SIDES))
 def test_a_side_attack_past_the_field_is_a_side_no_stop_failure(side):
-    label, env = classify_episode("1.25m", side_attack(side), side)
+    label, sim = classify_episode("1.25m", side_attack(side), side)
     assert label == f"side-{side}/no-stop"
-    assert not any(row["emergency_stop"] for row in env.trajectory())
+    assert not any(row.emergency_stop for row in sim.trajectory())
 
 
 @pytest.mark.parametrize("side", list(SIDES))
@@ -264,30 +266,30 @@ def test_a_side_attack_without_a_field_is_a_side_failure_of_a_moving_human(side)
 
 
 def test_a_human_charging_head_on_meets_the_swerving_robots_side_unseen_by_the_field():
-    env = AGVEnv("head-on", "1.25m", controller=NMPC, decision_period=0.2)
-    info, _ = run(env, charge)
-    assert info["outcome"] == "failure"
-    label = CLASSIFIER.classify(env.trajectory(), info["summary"], env.field_diameter)
+    sim = Simulation.build("head-on", "1.25m", controller=NMPC, decision_period=0.2)
+    result = run(sim, charge)
+    assert result.outcome == "failure"
+    label = CLASSIFIER.classify(sim.trajectory(), result.summary, sim.field)
     assert label in {"side-left/no-stop", "side-right/no-stop"}
 
 
 @pytest.mark.parametrize("side", list(SIDES))
 def test_a_human_grazing_the_field_then_beside_the_released_robot_is_restarted(side):
-    label, env = classify_episode("1.25m", graze_the_field(side), side)
+    label, sim = classify_episode("1.25m", graze_the_field(side), side)
     assert label == f"side-{side}/restarted"
-    rows = env.trajectory()
-    stop = next(index for index, row in enumerate(rows) if row["emergency_stop"])
-    assert any(row["robot_speed"] == 0.0 for row in rows[stop:])  # the stop held it still
-    assert not rows[-1]["emergency_stop"]
-    assert rows[-1]["robot_speed"] >= 0.05  # driving again at contact
+    rows = sim.trajectory()
+    stop = next(index for index, row in enumerate(rows) if row.emergency_stop)
+    assert any(row.robot_speed == 0.0 for row in rows[stop:])  # the stop held it still
+    assert not rows[-1].emergency_stop
+    assert rows[-1].robot_speed >= 0.05  # driving again at contact
 
 
 def test_a_human_cutting_in_over_the_fields_straight_edge_is_hit_while_the_robot_brakes():
-    label, env = classify_episode("1.25m", cut_in_behind_the_front_corner())
+    label, sim = classify_episode("1.25m", cut_in_behind_the_front_corner())
     assert label == "edge-entry/moving"
-    last = env.trajectory()[-1]
-    assert last["emergency_stop"]
-    assert last["robot_speed"] >= 0.05  # the stop came too late to bring it to a standstill
+    last = sim.trajectory()[-1]
+    assert last.emergency_stop
+    assert last.robot_speed >= 0.05  # the stop came too late to bring it to a standstill
 
 
 @pytest.mark.parametrize(
@@ -309,15 +311,15 @@ def test_a_human_standing_off_centre_in_the_path_is_hit_by_the_swerving_robots_s
 
 
 def test_a_human_chasing_the_robot_slower_than_it_drives_touches_its_rear_unsafely():
-    label, env = classify_episode("none", chase_the_rear())
+    label, sim = classify_episode("none", chase_the_rear())
     assert label == "rear/moving"
-    assert env.trajectory()[-1]["robot_speed"] >= 0.05
+    assert sim.trajectory()[-1].robot_speed >= 0.05
 
 
 def test_the_same_chase_with_a_field_fits_no_class_and_is_kept_as_other():
-    label, env = classify_episode("1.25m", chase_the_rear())
+    label, sim = classify_episode("1.25m", chase_the_rear())
     assert label == OTHER
-    assert not any(row["emergency_stop"] for row in env.trajectory())  # the field never saw it
+    assert not any(row.emergency_stop for row in sim.trajectory())  # the field never saw it
 
 
 # ------------------------------------------------------------------ unreachable classes
@@ -327,7 +329,12 @@ def braking_travel(speed, robot=RobotParams(), physics_step=0.05, standstill=0.0
     steps, travelled = 1, speed * physics_step  # the entry step: the stop applies from the next
     while True:
         motion = step_robot(
-            travelled, 0.0, 0.0, speed, 0.0, speed, 0.0, physics_step, robot, emergency_stop=True
+            RobotState(travelled, 0.0, 0.0, speed, 0.0),
+            speed,
+            0.0,
+            physics_step,
+            robot,
+            emergency_stop=True,
         )
         if motion.speed < standstill:
             return steps, travelled

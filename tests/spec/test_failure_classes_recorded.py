@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.nmpc import NMPCController
 
@@ -18,18 +18,14 @@ NMPC = NMPCController()  # built once: construction is the expensive part
 @pytest.mark.parametrize("name", sorted(RECORDED))
 def test_a_recorded_human_reaches_the_class(name):
     example = RECORDED[name]
-    env = AGVEnv(
+    simulation = Simulation.build(
         example["scenario"],
         example["field"],
+        example["decision_period"],
         controller=NMPC,
-        decision_period=example["decision_period"],
     )
-    env.reset(seed=0)
-    for action in example["actions"]:
-        _, _, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
-        if terminated or truncated:
-            break
-    assert info["outcome"] == "failure"
-    assert info["sim_time"] == pytest.approx(example["sim_time"])
-    label = MechanismClassifier().classify(env.trajectory(), info["summary"], env.field_diameter)
+    result = simulation.simulate(np.asarray(example["actions"], dtype=np.float32))
+    assert result.outcome == "failure"
+    assert result.summary.sim_time == pytest.approx(example["sim_time"])
+    label = MechanismClassifier().classify(result.trajectory, result.summary, simulation.field)
     assert label == name

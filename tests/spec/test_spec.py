@@ -45,7 +45,7 @@ def test_risk_matches_the_papers_equation():
 
 
 def test_accumulated_and_maximum_rewards():
-    risks = [0.1, 0.5, 0.2]
+    risks = 0.1 + 0.5 + 0.2  # summed over the decision's physics steps
     assert decision_reward("acc", risks, 0.9, last=False) == pytest.approx(0.8)
     assert decision_reward("max", risks, 0.9, last=False) == 0.0
     assert decision_reward("max", risks, 0.9, last=True) == pytest.approx(0.9)
@@ -61,8 +61,8 @@ def test_accumulated_and_maximum_rewards():
         ({"verdict": ContactVerdict.HUMAN_FROM_BEHIND}, Outcome.SAFE_CONTACT),
         ({"sut_error": True}, Outcome.SUT_ERROR),
         ({"goal_reached": True}, Outcome.GOAL),
-        ({"stop_held_for": 10.0}, Outcome.STALL),
-        ({"stop_held_for": 9.95}, None),
+        ({"emergency_stop_duration": 10.0}, Outcome.STALL),
+        ({"emergency_stop_duration": 9.95}, None),
         ({"sim_time": 30.0}, Outcome.TIMEOUT),
         ({}, None),
     ],
@@ -72,7 +72,7 @@ def test_episode_outcomes(kwargs, expected):
         "verdict": ContactVerdict.NONE,
         "goal_reached": False,
         "sim_time": 5.0,
-        "stop_held_for": 0.0,
+        "emergency_stop_duration": 0.0,
         "sut_error": False,
     } | kwargs
     assert episode_outcome(**arguments) is expected

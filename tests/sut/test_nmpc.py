@@ -74,7 +74,7 @@ def drive(
     duration: float = 30.0,
 ) -> Trace:
     """Run the controller every 0.2 s on 0.05 s physics steps until the goal or ``duration``."""
-    controller.reset(floor, route, start)
+    controller.reset(floor, route, start, RobotParams())
     state, time, trace = start, 0.0, Trace()
     substeps = round(controller.control_period / PHYSICS_STEP)
     while time < duration:
@@ -217,7 +217,7 @@ def test_a_human_walking_head_on_into_the_standing_robot_never_breaks_the_solver
         scenario.floor, scenario.robot_start.position, scenario.waypoints, scenario.goal, 0.5
     )
     robot = RobotState(6.0, 10.0, 0.0, 0.0, 0.0)
-    fatrop_controller.reset(scenario.floor, route, robot)
+    fatrop_controller.reset(scenario.floor, route, robot, RobotParams())
 
     def path(t: float) -> np.ndarray:
         return np.array([9.0 - 0.8 * t, 10.0])
@@ -257,7 +257,7 @@ def test_fatrop_and_ipopt_agree_on_the_first_command(
     for robot, human in recorded_situations():
         commands = []
         for controller in (fatrop_controller, ipopt_controller):
-            controller.reset(crossing.floor, crossing_route, robot)
+            controller.reset(crossing.floor, crossing_route, robot, RobotParams())
             commands.append(controller.control(6.0, robot, human))
         fatrop, ipopt = commands
         assert fatrop.status == ipopt.status == "ok"
@@ -308,7 +308,7 @@ def test_a_failed_solve_brakes_instead_of_raising(
 ) -> None:
     controller = NMPCController(NMPCParams(compiled=compiled))
     robot = RobotState(6.0, 10.0, 0.0, 1.0, 0.2)
-    controller.reset(crossing.floor, crossing_route, robot)
+    controller.reset(crossing.floor, crossing_route, robot, RobotParams())
     problem = controller._problem
     if compiled:
         assert problem.compiled is not None
@@ -338,7 +338,7 @@ def test_an_unconverged_solve_reports_the_solver_status(
 ) -> None:
     controller = NMPCController(NMPCParams(max_iterations=1))
     robot = RobotState(2.0, 10.0, 0.0, 0.1, 0.0)
-    controller.reset(crossing.floor, crossing_route, robot)
+    controller.reset(crossing.floor, crossing_route, robot, RobotParams())
 
     command = controller.control(0.0, robot, None)
 
@@ -368,7 +368,7 @@ def test_resumes_after_an_emergency_stop_it_did_not_see(
 def test_survives_a_pickle_round_trip(crossing: Scenario, crossing_route: Route) -> None:
     controller = NMPCController()
     robot = RobotState(5.0, 10.1, 0.05, 0.8, 0.0)
-    controller.reset(crossing.floor, crossing_route, robot)
+    controller.reset(crossing.floor, crossing_route, robot, RobotParams())
     controller.control(0.0, robot, None)
     following = RobotState(5.16, 10.1, 0.05, 0.8, 0.0)
 

@@ -1,6 +1,7 @@
 """The compiled fatrop solver: the same trajectories as CasADi's interpreted solver, a disk
 cache, and a fallback when nothing can be compiled."""
 
+import dataclasses
 import json
 import subprocess
 from pathlib import Path
@@ -9,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut import compiled
 from hazardhunt.sut.nmpc import NMPCController, NMPCParams
 
@@ -19,19 +20,13 @@ RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.j
 
 
 def replay(example: dict, controller: NMPCController) -> pd.DataFrame:
-    env = AGVEnv(
-        example["scenario"],
-        example["field"],
-        controller=controller,
-        decision_period=example["decision_period"],
-        measure_time=False,
+    """The recorded episode's trajectory, without the solve times measured on the clock."""
+    simulation = Simulation.build(
+        example["scenario"], example["field"], example["decision_period"], controller=controller
     )
-    env.reset(seed=0)
-    for action in example["actions"]:
-        _, _, terminated, truncated, _ = env.step(np.asarray(action, dtype=np.float32))
-        if terminated or truncated:
-            break
-    return pd.DataFrame(env.trajectory())
+    result = simulation.simulate(np.asarray(example["actions"], dtype=np.float32))
+    rows = [dataclasses.asdict(sample) for sample in result.trajectory]
+    return pd.DataFrame(rows).drop(columns="solve_time_s")
 
 
 def test_compiled_and_interpreted_solvers_drive_recorded_episodes_identically():

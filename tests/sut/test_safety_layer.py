@@ -1,18 +1,30 @@
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
+from shapely.geometry import Point, Polygon, box
 
-from hazardhunt.sut.protocols import RobotState
-from hazardhunt.sut.safety_layer import FIELD_SETTINGS, LaserSafetyLayer
-from hazardhunt.world.geometry import point_half_disc_distance, to_body_frame
-from hazardhunt.world.scenario import field_shape, load_scenario
+from hazardhunt.sut.safety_layer import (
+    FIELD_SETTINGS,
+    FieldShape,
+    LaserSafetyLayer,
+    field_shape,
+)
+from hazardhunt.world.bodies import RobotState
+from hazardhunt.world.scenario import load_scenario
 
 ROBOT = RobotState(x=0.0, y=0.0, heading=0.0, speed=1.0, yaw_rate=0.0)
+STANDING = RobotState(x=0.0, y=0.0, heading=0.0, speed=0.0, yaw_rate=0.0)
+EXAMPLES = Path(__file__).parents[2] / "examples"
+FRONT_FACE = 0.32
+"""Half the built-in robot's length: the front face's distance ahead of its centre, in m."""
 
 
 def in_field(setting, point, robot=ROBOT):
-    return LaserSafetyLayer(FIELD_SETTINGS[setting]).human_in_field(robot, np.array(point), 0.25)
+    layer = LaserSafetyLayer.for_field(FIELD_SETTINGS[setting])
+    return layer.human_in_field(robot, np.array(point), 0.25)
 
 
 @pytest.mark.parametrize(
@@ -40,18 +52,29 @@ def test_the_field_turns_with_the_robot():
 def test_the_stop_holds_until_the_robot_stands_and_the_field_is_free():
     layer = LaserSafetyLayer(2.0)
     inside, outside = np.array([1.0, 0.0]), np.array([5.0, 0.0])
-    assert layer.update(ROBOT, inside, 0.25).emergency_stop
+    assert layer.update(0.0, ROBOT, inside, 0.25).emergency_stop
     # The human leaves, but the robot still rolls: the stop holds.
-    assert layer.update(ROBOT, outside, 0.25).emergency_stop
-    standing = RobotState(x=0.0, y=0.0, heading=0.0, speed=0.0, yaw_rate=0.0)
+    assert layer.update(0.05, ROBOT, outside, 0.25).emergency_stop
     # Standing, but the human is back in the field: still holds.
-    assert layer.update(standing, inside, 0.25).emergency_stop
-    assert not layer.update(standing, outside, 0.25).emergency_stop
+    assert layer.update(0.1, STANDING, inside, 0.25).emergency_stop
+    assert not layer.update(0.15, STANDING, outside, 0.25).emergency_stop
+
+
+def test_with_a_response_time_the_brake_engages_that_much_later_even_if_the_human_left():
+    layer = LaserSafetyLayer(2.0, response_time=0.15)
+    inside, outside = np.array([1.0, 0.0]), np.array([5.0, 0.0])
+    status = layer.update(1.0, ROBOT, inside, 0.25)
+    assert status.human_in_field
+    assert not status.emergency_stop
+    assert not layer.update(1.05, ROBOT, outside, 0.25).emergency_stop
+    assert not layer.update(1.10, ROBOT, outside, 0.25).emergency_stop
+    assert layer.update(1.15, ROBOT, outside, 0.25).emergency_stop  # 0.15 s after the entry
+    assert not layer.update(1.20, STANDING, outside, 0.25).emergency_stop
 
 
 def test_no_field_never_stops():
     layer = LaserSafetyLayer(None)
-    assert not layer.update(ROBOT, np.array([0.5, 0.0]), 0.25).emergency_stop
+    assert not layer.update(0.0, ROBOT, np.array([0.5, 0.0]), 0.25).emergency_stop
 
 
 def test_unknown_setting_is_a_clear_error():
@@ -72,18 +95,68 @@ def test_side_bands_cover_the_robots_sides_up_to_their_width():
     assert layer.human_in_field(ROBOT, np.array([0.32 + 0.625 + 0.24, 0.0]), 0.25)
 
 
-def test_without_side_bands_the_layer_is_the_studys():
-    # The study's field: the human disc overlaps the half-disc ahead of the front face.
-    rng = np.random.default_rng(0)
-    layer = LaserSafetyLayer(1.25)
-    for point in rng.uniform(-2.0, 2.0, size=(500, 2)):
-        forward, left = to_body_frame(point, ROBOT.x, ROBOT.y, ROBOT.heading)
-        study = point_half_disc_distance(forward - 0.32, left, 0.625) < 0.25
-        assert layer.human_in_field(ROBOT, point, 0.25) == study
+def study_field(diameter, side_margin=0.0):
+    """The field drawn with shapely, independently of the layer's own geometry: a half-disc
+    on the front face (a 1,024-gon) and the side bands as boxes."""
+    radius = diameter / 2
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 1025)
+    arc = [(FRONT_FACE + radius * math.cos(a), radius * math.sin(a)) for a in angles]
+    shapes = [Polygon(arc)]
+    if side_margin > 0:
+        shapes.append(box(-FRONT_FACE, 0.25, FRONT_FACE, 0.25 + side_margin))
+        shapes.append(box(-FRONT_FACE, -0.25 - side_margin, FRONT_FACE, -0.25))
+    return shapely.union_all(shapes)
+
+
+@pytest.mark.parametrize(("diameter", "side_margin"), [(1.25, 0.0), (2.0, 0.0), (1.25, 0.4)])
+def test_the_layer_sees_the_human_exactly_where_the_drawn_field_is(diameter, side_margin):
+    field = study_field(diameter, side_margin)
+    layer = LaserSafetyLayer(diameter, side_margin=side_margin)
+    checked = 0
+    for point in np.random.default_rng(0).uniform(-2.0, 2.5, size=(2000, 2)):
+        distance = field.distance(Point(point))
+        if abs(distance - 0.25) < 1e-3:
+            continue  # on the boundary, where the drawn polygon's chords decide
+        assert layer.human_in_field(ROBOT, point, 0.25) == (distance < 0.25), point
+        checked += 1
+    assert checked > 1900
 
 
 def test_bad_field_shapes_are_errors():
     with pytest.raises(ValueError, match="side_margin must be >= 0"):
         LaserSafetyLayer(1.25, side_margin=-0.1)
-    with pytest.raises(ValueError, match="diameter must be positive or None"):
+    with pytest.raises(ValueError, match="diameter must be a positive number"):
         LaserSafetyLayer(0.0)
+    with pytest.raises(ValueError, match="response_time must be >= 0"):
+        FieldShape(1.25, response_time=math.inf)
+
+
+def test_a_scenario_defines_field_shapes_of_its_own():
+    scenario = load_scenario(EXAMPLES / "loading_dock" / "dock_crossing.toml")
+    assert field_shape(scenario, "sides") == FieldShape(1.25, 0.4)
+    assert field_shape(scenario, "2m") == FieldShape(2.0)
+    with pytest.raises(ValueError, match=r"unknown field 'wide': use one of none, 1\.25m, 2m"):
+        field_shape(scenario, "wide")
+
+
+@pytest.mark.parametrize(
+    ("table", "expected"),
+    [
+        ({"side_margin": -1}, "fields.wide.side_margin: side_margin must be >= 0"),
+        ({"diamter": 1.0}, "fields.wide.diamter: unknown key"),
+        ({"response_time": "fast"}, "fields.wide.response_time: must be a number"),
+    ],
+)
+def test_a_bad_field_table_names_the_file_and_the_key(table, expected):
+    scenario = load_scenario("crossing")
+    broken = type(scenario)(**{**vars(scenario), "fields": {"wide": table}})
+    with pytest.raises(ValueError, match=expected) as caught:
+        field_shape(broken, "wide")
+    assert scenario.source in str(caught.value)
+
+
+def test_a_scenario_cannot_redefine_a_built_in_field():
+    scenario = load_scenario("crossing")
+    broken = type(scenario)(**{**vars(scenario), "fields": {"2m": {"diameter": 3.0}}})
+    with pytest.raises(ValueError, match="'2m' is a built-in field setting"):
+        field_shape(broken, "none")

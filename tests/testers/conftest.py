@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import execute_run
+from hazardhunt.campaign.run import record_run
 
 EPISODES = 24
 SMALL_PPO = {"n_steps": 64, "batch_size": 32}
@@ -40,7 +40,7 @@ def seeded_run(tmp_path_factory):
         key = (tester, seed, copy)
         if key not in made:
             directory = tmp_path_factory.mktemp(f"{tester}-seed{seed}-{copy}") / "run"
-            execute_run(RunConfig(**CASES[tester], seed=seed, episodes=EPISODES), directory)
+            record_run(RunConfig(**CASES[tester], seed=seed, episodes=EPISODES), directory)
             made[key] = directory
         return made[key]
 

@@ -10,7 +10,7 @@ from stable_baselines3 import PPO
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.replay import replay_failure
-from hazardhunt.campaign.run import make_env
+from hazardhunt.campaign.run import simulation_of
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecorder
@@ -59,8 +59,8 @@ def test_failures_found_by_parallel_envs_replay_exactly(seeded_run):
     run = seeded_run("ppo-max-2-envs", 0)
     failures = pd.read_parquet(run / "failures.parquet")
     assert len(failures) > 0
-    for failure_id in failures["failure_id"]:
-        assert replay_failure(run, int(failure_id)).matches
+    for episode in failures["episode"]:
+        assert replay_failure(run, int(episode)).matches
     saved = json.loads((run / "tester" / "hyperparameters.json").read_text())
     assert saved["n_envs"] == 2
 
@@ -82,7 +82,7 @@ def explore(name: str, seed: int, episodes: int) -> tuple[EpisodeRecorder, list[
     """Let tester ``name`` explore a few episodes; returns the recorder and each episode's steps."""
     tester = make_tester(name, seed, SMALL_PPO)
     config = RunConfig(**CASES["ppo-acc"] | {"tester": name}, seed=seed, episodes=episodes)
-    log = StepLog(make_env(config, tester.reward))
+    log = StepLog(AGVEnv.wrapping(simulation_of(config), tester.reward))
     recorder = EpisodeRecorder(log, on_episode=lambda record: None)
     tester.explore(recorder, episodes)
     by_episode: list[list[tuple]] = [[]]
@@ -95,17 +95,17 @@ def explore(name: str, seed: int, episodes: int) -> tuple[EpisodeRecorder, list[
 
 def test_ppo_acc_learns_from_the_accumulated_risk():
     recorder, episodes = explore("ppo-acc", seed=0, episodes=2)
-    assert recorder.agv.reward_kind == "acc"
+    assert recorder.unwrapped.reward_kind == "acc"
     for steps in episodes:
         rewards = [reward for reward, _ in steps]
         assert rewards == [info["risk_sum"] for _, info in steps]
-        assert sum(rewards) == pytest.approx(steps[-1][1]["summary"]["return"])
+        assert sum(rewards) == pytest.approx(steps[-1][1]["summary"].risk_sum)
         assert sum(rewards) > 0
 
 
 def test_ppo_max_learns_from_the_episode_maximum_at_its_end():
     recorder, episodes = explore("ppo-max", seed=0, episodes=2)
-    assert recorder.agv.reward_kind == "max"
+    assert recorder.unwrapped.reward_kind == "max"
     for steps in episodes:
         rewards = [reward for reward, _ in steps]
         assert rewards[:-1] == [0.0] * (len(steps) - 1)
@@ -114,5 +114,5 @@ def test_ppo_max_learns_from_the_episode_maximum_at_its_end():
 
 def test_the_first_reset_carries_the_run_seed():
     recorder, _ = explore("ppo-max", seed=12345, episodes=1)
-    assert recorder.agv.np_random_seed == 12345
+    assert recorder.unwrapped.np_random_seed == 12345
     assert recorder.episodes_done == 1

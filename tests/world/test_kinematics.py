@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.geometry import distances_to_segments
 from hazardhunt.world.kinematics import step_human, step_robot
 from hazardhunt.world.scenario import load_scenario
@@ -40,38 +40,25 @@ def test_human_slides_along_a_wall_when_walking_into_it_at_an_angle():
 
 def test_robot_respects_acceleration_and_speed_limits():
     params = RobotParams()
-    state = (0.0, 0.0, 0.0, 0.0, 0.0)
-    motion = step_robot(*state, 5.0, 5.0, 0.05, params)
+    motion = step_robot(RobotState(0.0, 0.0, 0.0, 0.0, 0.0), 5.0, 5.0, 0.05, params)
     assert motion.speed == pytest.approx(0.05)  # 1 m/s^2 for 0.05 s
     assert motion.yaw_rate == pytest.approx(0.15)  # 3 rad/s^2 for 0.05 s
     for _ in range(100):
-        motion = step_robot(
-            motion.x,
-            motion.y,
-            motion.heading,
-            motion.speed,
-            motion.yaw_rate,
-            5.0,
-            5.0,
-            0.05,
-            params,
-        )
+        motion = step_robot(motion, 5.0, 5.0, 0.05, params)
     assert motion.speed == pytest.approx(1.2)
     assert motion.yaw_rate == pytest.approx(0.5)
 
 
 def test_emergency_stop_brakes_at_7_5_and_stops_turning():
-    motion = step_robot(0, 0, 0, 1.0, 0.3, 1.0, 0.3, 0.05, RobotParams(), emergency_stop=True)
+    motion = step_robot(
+        RobotState(0, 0, 0, 1.0, 0.3), 1.0, 0.3, 0.05, RobotParams(), emergency_stop=True
+    )
     assert motion.speed == pytest.approx(1.0 - 7.5 * 0.05)
     assert motion.yaw_rate == 0.0
     # From 1 m/s the robot stands within three physics steps and never backs up.
     for _ in range(3):
         motion = step_robot(
-            motion.x,
-            motion.y,
-            motion.heading,
-            motion.speed,
-            0.0,
+            RobotState(motion.x, motion.y, motion.heading, motion.speed, 0.0),
             1.0,
             0.0,
             0.05,

@@ -1,16 +1,9 @@
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hazardhunt.world.scenario import (
-    BUILTIN_SCENARIOS,
-    FieldShape,
-    ScenarioError,
-    field_shape,
-    load_scenario,
-)
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError, load_scenario
 
 
 @pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
@@ -67,11 +60,6 @@ def test_a_user_scenario_file_loads(tmp_path):
         (("x = 10.0, y = 5.0", "x = 5.0, y = 3.0"), "human.start: (5, 3) lies inside an obstacle"),
         (("x = 18.0, y = 10.0", "x = 25.0, y = 10.0"), "robot.goal: (25, 10) lies off"),
         (("name = ", "name = = "), "not valid TOML"),
-        (
-            ("[human]", '[fields."1.25m"]\ndiameter = 1.0\n[human]'),
-            "fields: '1.25m' is a built-in",
-        ),
-        (("[human]", "[fields.wide]\nside_margin = -1\n[human]"), "fields.wide.side_margin"),
     ],
 )
 def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):
@@ -100,28 +88,7 @@ def test_a_bad_map_names_the_map_file_and_the_obstacle(tmp_path):
         load_scenario(path)
 
 
-def test_a_scenario_defines_field_shapes_of_its_own(tmp_path):
-    text = (
-        VALID
-        + "[fields.sides]\ndiameter = 1.25\nside_margin = 0.4\n[fields.bands]\nside_margin = 0.3\n"
-    )
+def test_a_scenario_keeps_its_field_tables_for_the_safety_layer(tmp_path):
+    text = VALID + "[fields.sides]\ndiameter = 1.25\nside_margin = 0.4\n"
     scenario = load_scenario(write(tmp_path, text))
-    assert field_shape(scenario, "sides") == FieldShape(1.25, 0.4)
-    assert field_shape(scenario, "bands") == FieldShape(None, 0.3)
-    assert field_shape(scenario, "2m") == FieldShape(2.0, 0.0)
-    with pytest.raises(
-        ValueError, match=r"unknown field 'wide': use one of none, 1\.25m, 2m, sides"
-    ):
-        field_shape(scenario, "wide")
-
-
-def test_the_example_workplace_runs_with_its_own_field():
-    from hazardhunt.env.agv import AGVEnv
-
-    path = Path(__file__).parents[2] / "examples" / "loading_dock" / "dock_crossing.toml"
-    env = AGVEnv(str(path), "sides")
-    assert env.safety_layer.side_margin == 0.4
-    assert len(env.scenario.floor.blind_zones) == 1
-    env.reset(seed=0)
-    *_, info = env.step(np.array([0.0, 0.0], dtype=np.float32))
-    assert not info["human_visible"]  # the worker starts behind the pallet stack
+    assert scenario.fields == {"sides": {"diameter": 1.25, "side_margin": 0.4}}

@@ -27,8 +27,8 @@ from hazardhunt.analysis import figures, tables
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
 from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
-from hazardhunt.env.agv import AGVEnv
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
 
@@ -208,34 +208,34 @@ def _reward_hacking(report: _Report, results: Results) -> None:
     section = report.section(
         "Lesson 3: reward hacking, measured",
         "Per tester: the human's time inside the protective field and the emergency stops per "
-        "episode, the share of stalls and timeouts, the return of episodes without a failure, "
-        f"and the episodes flagged as loitering ({rule}). Returns compare within a reward "
-        "only: ppo-acc sums the risk over the episode, ppo-max and random take its maximum.",
+        "episode, the share of stalls and timeouts, the risk summed over episodes without a "
+        "failure (the return the accumulated reward pays for them), and the episodes flagged "
+        f"as loitering ({rule}).",
     )
     report.table(section, "reward_hacking", tables.reward_hacking(results.episodes))
     typical = tables.typical_loitering(results.loitering)
     if typical is None:
         section.parts.append("<p>No episode matched the loitering pattern.</p>")
         return
-    config, reward = load_run_config(results.run_directory(str(typical["run_id"])))
-    env, _ = replay_actions(config, reward, typical["actions"])
-    times, captions = loitering_frames(env)
-    path = plot_frames(report.figures / "loitering.png", env, times, captions)
+    config = load_run_config(results.run_directory(str(typical["run_id"])))
+    simulation, _ = replay_actions(config, typical["actions"])
+    times, captions = loitering_frames(simulation)
+    path = plot_frames(report.figures / "loitering.png", simulation, times, captions)
     report.image(
         section,
         path,
         f"The most typical loitering episode: {typical['run_id']}, episode "
-        f"{int(typical['episode'])} ({typical['outcome']}, {int(typical['estop_count'])} stops, "
-        f"{typical['time_in_field']:.1f} s in the field)",
+        f"{int(typical['episode'])} ({typical['outcome']}, "
+        f"{int(typical['emergency_stops'])} stops, {typical['time_in_field']:.1f} s in the field)",
     )
 
 
-def loitering_frames(env: AGVEnv) -> tuple[list[float], list[str]]:
+def loitering_frames(simulation: Simulation) -> tuple[list[float], list[str]]:
     """Four instants that tell a loitering episode: approach, stop, release, next stop (or,
     without a release, the stop held until the end)."""
-    rows = env.trajectory()
-    stops = [row["emergency_stop"] for row in rows]
-    times = [row["time"] for row in rows]
+    rows = simulation.trajectory()
+    stops = [row.emergency_stop for row in rows]
+    times = [row.time for row in rows]
     first = stops.index(True) if True in stops else 0
     release = next((i for i in range(first, len(rows)) if not stops[i]), None)
     again = (
@@ -290,22 +290,23 @@ def _representatives(report: _Report, results: Results) -> None:
         return
     rows = []
     for _, row in chosen.iterrows():
-        run_id, failure_id, name = str(row["run_id"]), int(row["failure_id"]), str(row["class"])
-        replay = replay_failure(results.run_directory(run_id), failure_id)
+        run_id, episode, name = str(row["run_id"]), int(row["episode"]), str(row["class"])
+        replay = replay_failure(results.run_directory(run_id), episode)
         stem = _file_name(f"class_{name}")
-        title = f"{name}: {run_id}, failure {failure_id}"
+        title = f"{name}: {run_id}, episode {episode}"
+        simulation = replay.simulation
         picture = plot_episode(
             report.figures / f"{stem}.png",
-            replay.env.scenario,
-            replay.env.route,
-            replay.env.trajectory(),
-            replay.env.field_diameter,
+            simulation.scenario,
+            simulation.route,
+            simulation.trajectory(),
+            simulation.field,
             title,
-            replay.replayed_outcome,
+            replay.result.outcome,
         )
         animation = animate_episode(
             report.figures / f"{stem}.gif",
-            replay.env,
+            simulation,
             title=name,
             fps=5,
             last_seconds=6.0,
@@ -317,14 +318,14 @@ def _representatives(report: _Report, results: Results) -> None:
             {
                 "class": name,
                 "run_id": run_id,
-                "failure_id": failure_id,
+                "episode": episode,
                 "sim_time": row["sim_time"],
                 "contact_face": row["contact_face"],
                 "replayed": "reproduced" if replay.matches else "NOT reproduced",
             }
         )
     report.table(
-        section, "representatives", pd.DataFrame(rows), "hazardhunt replay RUN --failure ID"
+        section, "representatives", pd.DataFrame(rows), "hazardhunt replay RUN --episode EPISODE"
     )
 
 

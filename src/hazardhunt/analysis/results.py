@@ -11,12 +11,13 @@ import pandas as pd
 
 from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.run import is_complete
+from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
     MechanismClassifier,
     classify_failures,
 )
-from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.sut.safety_layer import FieldShape
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
@@ -46,7 +47,17 @@ class Results:
     def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...]:
         """The classes a failure can have under a field setting (of ``scenario`` when it
         defines its own fields), ``other`` last."""
-        return self.classifier.classes_for(setting_diameter(field_setting, scenario))
+        return self.classifier.classes_for(self.field_shape(field_setting, scenario))
+
+    def field_shape(self, field_setting: str, scenario: str = "") -> FieldShape:
+        """The shape of a field setting, as the runs recorded it (of ``scenario``'s runs
+        when given)."""
+        runs = self.runs[self.runs["field"] == field_setting]
+        if scenario:
+            runs = runs[runs["scenario"] == scenario]
+        if runs.empty:
+            raise ResultsError(f"{self.directory}: no run used the field {field_setting!r}")
+        return FieldShape(**runs.iloc[0]["field_shape"])
 
     def run_directory(self, run_id: str) -> Path:
         """Where a run's files are."""
@@ -99,17 +110,19 @@ def _reclassified(
     relabelled = failures.copy()
     directories = runs.set_index("run_id")["directory"]
     for run_id, group in failures.groupby("run_id", sort=False):
-        stored = pd.read_parquet(Path(directories[run_id]) / "trajectories")
+        directory = Path(directories[run_id])
+        stored = pd.read_parquet(directory / "trajectories")
         trajectories = {
-            int(failure_id): samples.to_dict("records")
-            for failure_id, samples in stored.sort_values("time").groupby("failure_id")
+            int(episode): [TrajectorySample.from_row(row) for row in samples.to_dict("records")]
+            for episode, samples in stored.sort_values("time").groupby("episode")
         }
-        summaries = {int(row["failure_id"]): row.to_dict() for _, row in group.iterrows()}
+        summaries = {
+            int(row["episode"]): EpisodeSummary.from_row(row.to_dict())
+            for _, row in group.iterrows()
+        }
+        field = FieldShape(**_read_json(directory / "summary.json")["field_shape"])
         classes = classify_failures(
-            {failure_id: trajectories[failure_id] for failure_id in summaries},
-            summaries,
-            setting_diameter(str(group["field"].iloc[0]), str(group["scenario"].iloc[0])),
-            classifier,
+            {episode: trajectories[episode] for episode in summaries}, summaries, field, classifier
         )
         relabelled.loc[group.index, "class"] = [classes[i] for i in summaries]
     return relabelled
@@ -155,12 +168,3 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ResultsError(f"{path}: expected a JSON object")
     return data
-
-
-def setting_diameter(field_setting: str, scenario: str) -> float | None:
-    """The front field's diameter of a built-in field setting or one ``scenario`` defines, in m."""
-    if field_setting in FIELD_SETTINGS:
-        return FIELD_SETTINGS[field_setting]
-    from hazardhunt.world.scenario import field_shape, load_scenario
-
-    return field_shape(load_scenario(scenario), field_setting).diameter

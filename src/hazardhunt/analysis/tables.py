@@ -100,7 +100,7 @@ def failures_per_class(failures: pd.DataFrame) -> pd.DataFrame:
     if failures.empty or "class" not in failures:
         return pd.DataFrame(columns=["class"])
     counts = failures.pivot_table(
-        index="class", columns="tester", values="failure_id", aggfunc="count", fill_value=0
+        index="class", columns="tester", values="episode", aggfunc="count", fill_value=0
     )
     return counts.reset_index().rename_axis(columns=None)
 
@@ -188,8 +188,8 @@ def _against_baseline(
 
 def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
     """Lesson 3, measured per tester: the human's time in the field and the stops it caused per
-    episode, the share of stalls and timeouts, the return of episodes without a failure, and the
-    episodes flagged as loitering."""
+    episode, the share of stalls and timeouts, the risk summed over episodes without a failure
+    (what the accumulated reward pays), and the episodes flagged as loitering."""
     rows = []
     for tester, group in episodes.groupby("tester", sort=True):
         no_failure = group[group["outcome"] != "failure"]
@@ -199,10 +199,10 @@ def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
                 "tester": tester,
                 "episodes": len(group),
                 "time in field per episode (s)": group["time_in_field"].mean(),
-                "emergency stops per episode": group["estop_count"].mean(),
+                "emergency stops per episode": group["emergency_stops"].mean(),
                 "stall share": (group["outcome"] == "stall").mean(),
                 "timeout share": (group["outcome"] == "timeout").mean(),
-                "return without failure": no_failure["return"].mean(),
+                "risk sum without failure": no_failure["risk_sum"].mean(),
                 "loitering episodes": int(loitering.sum()),
                 "loitering share": float(loitering.mean()),
             }
@@ -272,7 +272,7 @@ def typical_loitering(loitering: pd.DataFrame) -> pd.Series | None:
     """The loitering episode closest to the median time in field and number of stops."""
     if loitering.empty:
         return None
-    features = loitering[["time_in_field", "estop_count"]].astype(float)
+    features = loitering[["time_in_field", "emergency_stops"]].astype(float)
     spread = features.std().replace(0.0, 1.0).fillna(1.0)
     distance = (((features - features.median()) / spread) ** 2).sum(axis=1)
     return loitering.loc[distance.idxmin()]

@@ -55,8 +55,13 @@ from rich.table import Table
 
 import hazardhunt
 from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
-from hazardhunt.campaign.run import RunProgress, execute_run, is_complete
-from hazardhunt.campaign.runner import execute_into_place, partial_directory
+from hazardhunt.campaign.run import (
+    RunProgress,
+    execute_run_atomically,
+    is_complete,
+    partial_directory,
+    record_run,
+)
 from hazardhunt.campaign.store import write_json_atomic
 
 EXECUTORS = ("local", "ray")
@@ -459,7 +464,7 @@ def _initialize_worker(campaign_pid: int, progress_queue: Queue[tuple[str, int]]
 
 def _run_in_worker(run: RunConfig, runs_directory: Path) -> dict[str, Any]:
     """Execute ``run`` into its partial directory and rename it into place once complete."""
-    return execute_into_place(run, runs_directory / run.run_id, _progress_reporter(run.run_id))
+    return execute_run_atomically(run, runs_directory / run.run_id, _progress_reporter(run.run_id))
 
 
 def _progress_reporter(run_id: str) -> Callable[[RunProgress], None]:
@@ -526,7 +531,7 @@ def _run_packed(run: RunConfig) -> bytes:
     """Execute ``run`` in a scratch directory and return that directory as a tar archive."""
     with tempfile.TemporaryDirectory(prefix="hazardhunt-run-") as scratch:
         directory = Path(scratch) / run.run_id
-        execute_run(run, directory)
+        record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:
             archive.add(directory, arcname=".")

@@ -27,8 +27,8 @@ import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import EnvOptions, PluginSpec
-from hazardhunt.campaign.replay import load_run_config, play
-from hazardhunt.campaign.run import build_env
+from hazardhunt.campaign.replay import load_run_config
+from hazardhunt.campaign.run import build_simulation
 from hazardhunt.campaign.toml_writer import dumps
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError
@@ -44,7 +44,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-_ENV_OPTIONS = ("decision_period", "solver", "episode_duration", "stall_duration")
+_ENV_OPTIONS = ("decision_period", "solver", "episode_duration", "stall_duration", "robot")
 """The keys of a case's ``environment`` that are the run's environment options."""
 CASE_FORMAT = 1
 """Version of the case file layout."""
@@ -94,10 +94,10 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
     out.mkdir(parents=True, exist_ok=True)
     written = []
     configs: dict[str, Any] = {}
-    for _, row in chosen.sort_values(["run_id", "failure_id"]).iterrows():
+    for _, row in chosen.sort_values(["run_id", "episode"]).iterrows():
         run_id = str(row["run_id"])
         if run_id not in configs:
-            configs[run_id] = load_run_config(results.run_directory(run_id))[0]
+            configs[run_id] = load_run_config(results.run_directory(run_id))
         case = _case(row, configs[run_id])
         path = out / f"{case['name']}.toml"
         header = (
@@ -112,7 +112,7 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
 def _case(row: pd.Series, config: Any) -> dict[str, Any]:
     """The contents of one case file."""
     failure_class = str(row.get("class", "other"))
-    name = f"{row['run_id']}__failure{int(row['failure_id'])}"
+    name = f"{row['run_id']}__episode{int(row['episode'])}"
     sut: dict[str, Any] = {}
     for key in ("controller", "safety_layer"):
         spec: PluginSpec | None = getattr(config, key)
@@ -124,7 +124,7 @@ def _case(row: pd.Series, config: Any) -> dict[str, Any]:
         "name": name,
         "description": (
             f"{failure_class}, found by {row['tester']} (seed {int(row['seed'])}) in run "
-            f"{row['run_id']} as failure {int(row['failure_id'])}"
+            f"{row['run_id']} in episode {int(row['episode'])}"
         ),
         "environment": {
             "field": str(row["field"]),
@@ -140,7 +140,7 @@ def _case(row: pd.Series, config: Any) -> dict[str, Any]:
         "found": {
             "run_id": str(row["run_id"]),
             "tester": str(row["tester"]),
-            "failure_id": int(row["failure_id"]),
+            "episode": int(row["episode"]),
             "hazardhunt_version": hazardhunt.__version__,
         },
         "sut": sut,
@@ -219,8 +219,8 @@ def regress_case(
     except ValidationError as error:
         raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
     try:
-        env = build_env(
-            scenario, field or environment["field"], options, "max", controller, safety_layer
+        simulation = build_simulation(
+            scenario, field or environment["field"], options, controller, safety_layer
         )
     except ScenarioError as error:
         raise CaseError(f"{path}: environment: {error}") from None
@@ -228,12 +228,13 @@ def regress_case(
         if isinstance(error, PluginError):
             raise
         raise CaseError(f"{path}: environment: {error}") from None
-    info = play(env, environment["seed"], case["human"]["actions"])
-    outcome = info["outcome"] or "unfinished"
+    actions = np.asarray(case["human"]["actions"], dtype=np.float32).reshape(-1, 2)
+    result = simulation.simulate(actions)
+    outcome = result.outcome or "unfinished"
     failure_class = None
     if outcome == "failure":
-        failure_class = MechanismClassifier(robot=env.robot_params).classify(
-            env.trajectory(), info["summary"], env.field_diameter
+        failure_class = MechanismClassifier(robot=simulation.robot_params).classify(
+            result.trajectory or (), result.summary, simulation.field
         )
     expected = case["expected"]["class"]
     if failure_class == expected:
@@ -243,7 +244,7 @@ def regress_case(
     else:
         verdict = "fixed"
     return RegressionResult(
-        path.name, expected, outcome, failure_class, float(info["sim_time"]), verdict
+        path.name, expected, outcome, failure_class, result.summary.sim_time, verdict
     )
 
 

@@ -20,6 +20,7 @@ from pydantic import (
 
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.testers import TESTER_NAMES, make_tester
+from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.scenario import format_validation_error
 
 if sys.version_info >= (3, 11):
@@ -47,6 +48,9 @@ class EnvOptions(_Strict):
     """Simulated time after which an episode times out, in s."""
     stall_duration: float = Field(default=10.0, gt=0)
     """Continuous emergency-stop time after which an episode stalls, in s."""
+    robot: RobotParams = RobotParams()
+    """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
+    controller receives them in ``reset``."""
 
 
 class PluginSpec(_Strict):
@@ -103,7 +107,8 @@ def _check_scenario(value: str) -> str:
 
 def _check_fields(scenario: str, fields: list[str]) -> None:
     """Raises ValueError unless every field is built in or defined by the scenario."""
-    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, field_shape, load_scenario
+    from hazardhunt.sut.safety_layer import field_shape
+    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, load_scenario
 
     if all(f in FIELD_SETTINGS for f in fields):
         return

@@ -1,24 +1,46 @@
-"""One run: a tester explores one scenario and field setting for a budget of episodes."""
+"""One run: a tester explores one scenario and field setting for a budget of episodes.
+
+Three ways to execute a run, from the outside in:
+
+- :func:`execute_run`: what ``hazardhunt run`` calls; keeps a finished run of the same
+  configuration, refuses anything else in the way, shows a progress bar;
+- :func:`execute_run_atomically`: writes into a hidden partial directory and renames it into
+  place once complete (what each run of a campaign does);
+- :func:`record_run`: writes the run's files into a new directory (the two above, and Ray's
+  workers, call it).
+"""
 
 from __future__ import annotations
 
+import json
 import platform
+import shutil
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
 import hazardhunt
-from hazardhunt.campaign.config import EnvOptions, PluginSpec, RunConfig
+from hazardhunt.campaign.config import ConfigError, EnvOptions, PluginSpec, RunConfig
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
 from hazardhunt.spec.outcomes import TerminationParams
-from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
-from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder
+from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, tester_reward
 from hazardhunt.world.scenario import Scenario
 
 
@@ -35,33 +57,24 @@ class RunProgress:
 ProgressCallback = Callable[[RunProgress], None]
 
 
-def make_env(config: RunConfig, reward: RewardKind) -> AGVEnv:
-    """The environment a run's configuration describes, with its plug-ins built."""
-    return build_env(
-        config.scenario, config.field, config.env, reward, config.controller, config.safety_layer
-    )
-
-
-def build_env(
+def build_simulation(
     scenario: str | Scenario,
     field: str,
     options: EnvOptions,
-    reward: RewardKind = "max",
     controller: PluginSpec | None = None,
     safety_layer: PluginSpec | None = None,
-) -> AGVEnv:
-    """An environment from its parts: the built-in SUT unless plug-ins are given.
+) -> Simulation:
+    """The simulation a run's settings describe: the built-in SUT unless plug-ins are given.
 
     Raises:
         PluginError: A plug-in does not load.
     """
     from hazardhunt.sut.plugins import build_controller, build_safety_layer
 
-    return AGVEnv(
+    return Simulation.build(
         scenario,
         field,
-        reward=reward,
-        decision_period=options.decision_period,
+        options.decision_period,
         solver=options.solver,
         controller=None
         if controller is None
@@ -70,10 +83,18 @@ def build_env(
         if safety_layer is None
         else build_safety_layer(safety_layer.path, safety_layer.params, safety_layer.search_path),
         termination=TerminationParams(options.episode_duration, options.stall_duration),
+        robot=options.robot,
     )
 
 
-def execute_run(
+def simulation_of(config: RunConfig) -> Simulation:
+    """The simulation of a run's configuration."""
+    return build_simulation(
+        config.scenario, config.field, config.env, config.controller, config.safety_layer
+    )
+
+
+def record_run(
     config: RunConfig, directory: Path, progress: ProgressCallback | None = None
 ) -> dict[str, Any]:
     """Run ``config`` and write its results into ``directory`` (created; must not exist).
@@ -84,54 +105,44 @@ def execute_run(
     directory.mkdir(parents=True)
     started_at = datetime.now(timezone.utc).isoformat()
     tester = make_tester(config.tester, config.seed, config.tester_params)
-    env = make_env(config, tester.reward)
-    classifier = MechanismClassifier(robot=env.robot_params)
+    simulation = simulation_of(config)
+    classifier = MechanismClassifier(robot=simulation.robot_params)
     write_json_atomic(
         directory / "config.json",
         {
             "run": config.model_dump(),
             "run_id": config.run_id,
-            "reward": tester.reward,
+            "reward": tester_reward(tester),
             "hazardhunt_version": hazardhunt.__version__,
             "source_digest": hazardhunt.source_digest(),
             "python": platform.python_version(),
-            "physics_step": env.physics_step,
-            "control_period": env.controller.control_period,
+            "physics_step": simulation.physics_step,
+            "control_period": simulation.controller.control_period,
+            "field_shape": asdict(simulation.field),
             "started_at": started_at,
         },
     )
-    store = RunStore(
-        directory,
-        {
-            "scenario": config.scenario,
-            "field": config.field,
-            "seed": config.seed,
-            "decision_period": config.env.decision_period,
-        },
-        classifier,
-        env.field_diameter,
-    )
+    replay_keys = {
+        "scenario": config.scenario,
+        "field": config.field,
+        "seed": config.seed,
+        "decision_period": config.env.decision_period,
+    }
+    store = RunStore(directory, replay_keys, classifier, simulation.field)
     clock = time.perf_counter()
 
     def on_episode(record: EpisodeRecord) -> None:
         store.add(record)
         if progress is not None:
-            progress(
-                RunProgress(
-                    record.index + 1,
-                    config.episodes,
-                    store.failure_count,
-                    time.perf_counter() - clock,
-                )
-            )
+            elapsed = time.perf_counter() - clock
+            progress(RunProgress(record.episode + 1, config.episodes, store.failure_count, elapsed))
 
-    recorder = EpisodeRecorder(env, on_episode)
+    recorder = EpisodeRecorder(AGVEnv.wrapping(simulation, tester_reward(tester)), on_episode)
     tester.explore(recorder, config.episodes)
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock
     outcomes = [row["outcome"] for row in store.episodes]
-    first_failure = next((i for i, o in enumerate(outcomes) if o == "failure"), None)
     summary = {
         "run_id": config.run_id,
         "scenario": config.scenario,
@@ -140,17 +151,15 @@ def execute_run(
         "seed": config.seed,
         "source_digest": hazardhunt.source_digest(),
         "episodes": len(outcomes),
-        "failures": outcomes.count("failure"),
-        "safe_contacts": outcomes.count("safe_contact"),
-        "stalls": outcomes.count("stall"),
-        "timeouts": outcomes.count("timeout"),
-        "goals": outcomes.count("goal"),
-        "sut_errors": outcomes.count("sut_error"),
-        "first_failure_episode": first_failure,
+        **{f"{outcome}s": outcomes.count(outcome) for outcome in _OUTCOME_COUNTS},
+        "first_failure_episode": next(
+            (i for i, outcome in enumerate(outcomes) if outcome == "failure"), None
+        ),
+        "field_shape": asdict(simulation.field),
         "classifier": classifier.name,
         "classes": store.classes,
         "classes_found": len(set(store.classes) - {OTHER}),
-        "classes_total": len(classifier.classes_for(env.field_diameter)) - 1,
+        "classes_total": len(classifier.classes_for(simulation.field)) - 1,
         "wall_time_s": wall_time,
         "episodes_per_s": len(outcomes) / wall_time if wall_time > 0 else 0.0,
         "started_at": started_at,
@@ -160,6 +169,77 @@ def execute_run(
     return summary
 
 
+_OUTCOME_COUNTS = ("failure", "safe_contact", "stall", "timeout", "goal", "sut_error")
+"""Outcomes the run summary counts, each as ``<outcome>s``."""
+
+
 def is_complete(directory: Path) -> bool:
     """Whether a run directory holds a finished run."""
     return (directory / "summary.json").is_file()
+
+
+def partial_directory(out: Path) -> Path:
+    """Where a run into ``out`` is written until it completes."""
+    return out.parent / f".{out.name}.partial"
+
+
+def execute_run_atomically(
+    config: RunConfig, out: Path, progress: ProgressCallback | None = None
+) -> dict[str, Any]:
+    """Execute ``config`` into the hidden partial sibling of ``out`` (discarding any leftover
+    there) and rename it to ``out`` once complete; the run's summary."""
+    partial = partial_directory(out)
+    if partial.exists():
+        shutil.rmtree(partial)
+    summary = record_run(config, partial, progress)
+    partial.rename(out)
+    return summary
+
+
+def execute_run(config: RunConfig, out: Path, console: Console | None = None) -> dict[str, Any]:
+    """Execute ``config`` into ``out``, which appears only once the run is complete.
+
+    A complete run already in ``out`` with the same configuration is kept and its summary
+    returned; a leftover partial run is discarded and redone (runs are deterministic).
+
+    Args:
+        config: The run.
+        out: The run directory.
+        console: Where a progress bar is shown; none if None.
+
+    Raises:
+        ConfigError: ``out`` holds something else, or a run of another configuration.
+    """
+    if out.exists():
+        if is_complete(out):
+            stored = json.loads((out / "config.json").read_text())["run"]
+            if RunConfig.model_validate(stored) != config:
+                raise ConfigError(f"{out}: holds a finished run of another configuration")
+            summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
+            if console is not None:
+                console.print(f"{out}: already complete")
+            return summary
+        raise ConfigError(f"{out}: exists and is not a finished run; choose another --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if console is None:
+        return execute_run_atomically(config, out)
+    return _with_progress(config, out, console)
+
+
+def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, Any]:
+    columns = (
+        TextColumn(f"{config.run_id}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]:.1f} episodes/s, {task.fields[failures]} failures"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=console, transient=False) as progress:
+        task = progress.add_task("run", total=config.episodes, rate=0.0, failures=0)
+
+        def update(state: RunProgress) -> None:
+            rate = state.episodes_done / state.elapsed_s if state.elapsed_s > 0 else 0.0
+            progress.update(task, completed=state.episodes_done, rate=rate, failures=state.failures)
+
+        return execute_run_atomically(config, out, update)

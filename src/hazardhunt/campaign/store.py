@@ -7,49 +7,41 @@ Layout of a run directory::
     failures.parquet     one row per failure: what replays it (scenario, field, seed, actions)
                          and its class (SPEC 6)
     loitering.parquet    one row per episode flagged as loitering (reward hacking), with its actions
-    trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by failure_id
+    trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by episode
     tester/              what the tester learned (the PPO model)
     summary.json         written last: its presence marks the run complete
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
+from hazardhunt.spec.episode import (
+    SUMMARY_COLUMNS,
+    TIMING_COLUMNS,
+    TRAJECTORY_COLUMNS,
+    TrajectorySample,
+)
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.base import EpisodeRecord
 
-EPISODE_COLUMNS = (
-    "outcome",
-    "decision_steps",
-    "sim_time",
-    "return",
-    "max_risk",
-    "min_clearance",
-    "estop_count",
-    "time_in_field",
-    "wall_time_s",
-    "solves",
-    "failed_commands",
-    "solve_time_mean_s",
-    "solve_time_median_s",
-    "solve_time_max_s",
-    "contact_face",
-)
-"""Columns of ``episodes.parquet`` besides ``episode``, ``controller_errors`` and ``loitering``."""
+EPISODE_COLUMNS = ("episode", *SUMMARY_COLUMNS, *TIMING_COLUMNS, "loitering")
+"""Columns of ``episodes.parquet``: the episode's index, its summary, its wall-clock timing
+and whether it loitered (reward hacking)."""
 
 FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_face", "max_risk")
 """Columns of ``failures.parquet`` taken from the episode summary (besides the replay keys)."""
 
-LOITERING_COLUMNS = ("outcome", "sim_time", "decision_steps", "estop_count", "time_in_field")
+LOITERING_COLUMNS = ("outcome", "sim_time", "decision_steps", "emergency_stops", "time_in_field")
 """Columns of ``loitering.parquet`` taken from the episode summary (besides the replay keys)."""
 
 TRAJECTORY_FLUSH = 200
@@ -91,7 +83,7 @@ class RunStore:
         directory: Path,
         replay_keys: dict[str, Any],
         classifier: FailureClassifier,
-        field_diameter: float | None,
+        field: FieldShape,
         loitering: LoiteringRule = LoiteringRule(),
     ) -> None:
         """Args:
@@ -99,13 +91,13 @@ class RunStore:
         replay_keys: Columns every failure row carries to replay it (scenario, field, seed,
             decision period).
         classifier: Names each failure's class.
-        field_diameter: The protective field's diameter for the classifier, in m (None: none).
+        field: The protective field, for the classifier.
         loitering: Flags episodes whose actions are kept to show reward hacking.
         """
         self.directory = directory
         self.replay_keys = replay_keys
         self.classifier = classifier
-        self.field_diameter = field_diameter
+        self.field = field
         self.loitering_rule = loitering
         self.loitering: list[dict[str, Any]] = []
         self.episodes: list[dict[str, Any]] = []
@@ -117,37 +109,35 @@ class RunStore:
 
     def add(self, record: EpisodeRecord) -> None:
         """Store one finished episode."""
-        summary = record.summary
-        row = {"episode": record.index} | {k: summary[k] for k in EPISODE_COLUMNS}
-        row["controller_errors"] = "; ".join(summary["controller_errors"])
+        result, episode = record.result, record.episode
+        summary = result.summary
+        row = {"episode": episode, **summary.as_row(), **dataclasses.asdict(result.timing)}
         row["loitering"] = self.loitering_rule.matches(summary)
         self.episodes.append(row)
+        replay = {"episode": episode, **self.replay_keys}
         if row["loitering"]:
             self.loitering.append(
                 {
-                    "episode": record.index,
-                    **self.replay_keys,
-                    **{key: summary[key] for key in LOITERING_COLUMNS},
-                    "actions": record.actions.tolist(),
+                    **replay,
+                    **{key: row[key] for key in LOITERING_COLUMNS},
+                    "actions": result.actions.tolist(),
                 }
             )
-        if summary["outcome"] != "failure":
+        if summary.outcome != "failure":
             return
-        contact = record.trajectory[-1]
+        trajectory = result.trajectory or ()
+        contact = trajectory[-1] if trajectory else None
         self.failures.append(
             {
-                "failure_id": record.index,
-                "episode": record.index,
-                **self.replay_keys,
-                **{key: summary[key] for key in FAILURE_SUMMARY_COLUMNS},
-                "class": self.classifier.classify(record.trajectory, summary, self.field_diameter),
-                "contact_x": contact["human_x"],
-                "contact_y": contact["human_y"],
-                "actions": record.actions.tolist(),
+                **replay,
+                **{key: row[key] for key in FAILURE_SUMMARY_COLUMNS},
+                "class": self.classifier.classify(trajectory, summary, self.field),
+                "contact_x": None if contact is None else contact.human_x,
+                "contact_y": None if contact is None else contact.human_y,
+                "actions": result.actions.tolist(),
             }
         )
-        for sample in record.trajectory:
-            self._trajectory_rows.append({"failure_id": record.index} | _flat(sample))
+        self._trajectory_rows.extend({"episode": episode} | s.as_row() for s in trajectory)
         self._buffered_failures += 1
         if self._buffered_failures >= TRAJECTORY_FLUSH:
             self._flush_trajectories()
@@ -161,18 +151,14 @@ class RunStore:
     def classes(self) -> list[str]:
         """The distinct failure classes stored so far, in the classifier's order."""
         found = {row["class"] for row in self.failures}
-        return [name for name in self.classifier.classes_for(self.field_diameter) if name in found]
+        return [name for name in self.classifier.classes_for(self.field) if name in found]
 
     def close(self) -> None:
         """Write the tables."""
         self._flush_trajectories()
-        episodes = pd.DataFrame(
-            self.episodes,
-            columns=["episode", *EPISODE_COLUMNS, "controller_errors", "loitering"],
-        )
+        episodes = pd.DataFrame(self.episodes, columns=list(EPISODE_COLUMNS))
         episodes.to_parquet(self.directory / "episodes.parquet", index=False)
         failure_columns = [
-            "failure_id",
             "episode",
             *self.replay_keys,
             *FAILURE_SUMMARY_COLUMNS,
@@ -193,24 +179,15 @@ class RunStore:
         if not self._trajectory_rows:
             return
         part = self.directory / "trajectories" / f"part-{self._parts:05d}.parquet"
-        pd.DataFrame(self._trajectory_rows).to_parquet(part, index=False)
+        columns = ["episode", *TRAJECTORY_COLUMNS]
+        pd.DataFrame(self._trajectory_rows, columns=columns).to_parquet(part, index=False)
         self._parts += 1
         self._trajectory_rows = []
         self._buffered_failures = 0
 
 
-def _flat(sample: dict[str, Any]) -> dict[str, Any]:
-    """A trajectory sample with its arrays as flat lists (Parquet list columns)."""
-    flat = dict(sample)
-    for key in ("predicted_human", "planned_positions"):
-        value = flat.get(key)
-        flat[key] = None if value is None else np.asarray(value, dtype=np.float64).ravel().tolist()
-    return flat
-
-
-def read_trajectory(run_directory: Path, failure_id: int) -> pd.DataFrame:
+def read_trajectory(run_directory: Path, episode: int) -> list[TrajectorySample]:
     """The stored trajectory of one failure, samples in time order."""
-    table = pd.read_parquet(
-        run_directory / "trajectories", filters=[("failure_id", "==", failure_id)]
-    )
-    return table.sort_values("time").reset_index(drop=True)
+    table = pd.read_parquet(run_directory / "trajectories", filters=[("episode", "==", episode)])
+    table = table.sort_values("time")
+    return [TrajectorySample.from_row(row) for row in table.to_dict("records")]

@@ -14,13 +14,15 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon, Wedge
 from numpy.typing import NDArray
 
+from hazardhunt.spec.episode import TrajectorySample
 from hazardhunt.sut.route import Route
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.geometry import rectangle_corners
 from hazardhunt.world.scenario import Scenario
 
 if TYPE_CHECKING:
-    from hazardhunt.env.agv import AGVEnv
+    from hazardhunt.sim.simulation import Simulation
 
 OUTCOME_COLOURS = {
     "failure": "#d62728",
@@ -54,29 +56,32 @@ def draw_robot(
     ax: Axes,
     pose: tuple[float, float, float],
     params: RobotParams,
-    field_diameter: float | None,
+    field: FieldShape,
     emergency_stop: bool = False,
     alpha: float = 1.0,
 ) -> None:
-    """The robot's rectangle and, when it has one, its half-disc protective field."""
+    """The robot's rectangle and its protective field: the half-disc ahead and the side
+    bands, red while the emergency stop holds."""
     x, y, heading = pose
-    if field_diameter is not None:
+    style: dict[str, Any] = {
+        "facecolor": "#d62728" if emergency_stop else "#2ca02c",
+        "alpha": 0.25 * alpha,
+        "edgecolor": "none",
+    }
+    if field.diameter is not None:
         front = (
             x + params.length / 2 * math.cos(heading),
             y + params.length / 2 * math.sin(heading),
         )
         degrees = math.degrees(heading)
-        ax.add_patch(
-            Wedge(
-                front,
-                field_diameter / 2,
-                degrees - 90,
-                degrees + 90,
-                facecolor="#d62728" if emergency_stop else "#2ca02c",
-                alpha=0.25 * alpha,
-                edgecolor="none",
-            )
-        )
+        ax.add_patch(Wedge(front, field.diameter / 2, degrees - 90, degrees + 90, **style))
+    if field.side_margin > 0.0:
+        offset = params.width / 2 + field.side_margin / 2
+        for side in (1.0, -1.0):
+            centre_x = x - side * offset * math.sin(heading)
+            centre_y = y + side * offset * math.cos(heading)
+            band = rectangle_corners(centre_x, centre_y, heading, params.length, field.side_margin)
+            ax.add_patch(Polygon(band, closed=True, **style))
     corners = rectangle_corners(x, y, heading, params.length, params.width)
     ax.add_patch(
         Polygon(corners, closed=True, facecolor="#1f77b4", edgecolor="black", alpha=alpha, zorder=3)
@@ -102,8 +107,8 @@ def plot_episode(
     path: Path,
     scenario: Scenario,
     route: Route,
-    trajectory: list[dict[str, Any]],
-    field_diameter: float | None,
+    trajectory: Sequence[TrajectorySample],
+    field: FieldShape,
     title: str,
     outcome: str | None = None,
     robot: RobotParams = RobotParams(),
@@ -113,24 +118,20 @@ def plot_episode(
     figure = Figure(figsize=(7, 7), dpi=110)
     ax = figure.add_subplot()
     draw_floor(ax, scenario, route)
-    robot_track = np.array([[row["robot_x"], row["robot_y"]] for row in trajectory])
-    human_track = np.array([[row["human_x"], row["human_y"]] for row in trajectory])
+    robot_track = np.array([[row.robot_x, row.robot_y] for row in trajectory])
+    human_track = np.array([[row.human_x, row.human_y] for row in trajectory])
     ax.plot(*robot_track.T, color="#1f77b4", linewidth=1.5, label="robot")
     ax.plot(*human_track.T, color="#ff7f0e", linewidth=1.5, label="human")
     ax.plot(*robot_track[0], "s", color="#1f77b4", markerfacecolor="white", label="start")
     ax.plot(*human_track[0], "o", color="#ff7f0e", markerfacecolor="white")
-    stops = np.array([row["emergency_stop"] for row in trajectory], dtype=bool)
+    stops = np.array([row.emergency_stop for row in trajectory], dtype=bool)
     if stops.any():
         ax.plot(*robot_track[stops].T, "x", color="#d62728", markersize=4, label="emergency stop")
     last = trajectory[-1]
     draw_robot(
-        ax,
-        (last["robot_x"], last["robot_y"], last["robot_heading"]),
-        robot,
-        field_diameter,
-        last["emergency_stop"],
+        ax, (last.robot_x, last.robot_y, last.robot_heading), robot, field, last.emergency_stop
     )
-    draw_human(ax, (last["human_x"], last["human_y"]), last["human_heading"], human)
+    draw_human(ax, (last.human_x, last.human_y), last.human_heading, human)
     colour = OUTCOME_COLOURS.get(outcome or "", "black")
     ax.set_title(title, color=colour)
     ax.legend(loc="upper right", fontsize=8)
@@ -140,45 +141,41 @@ def plot_episode(
     return path
 
 
-def render_rgb(env: AGVEnv) -> NDArray[np.uint8]:
-    """The environment's current state as an RGB array (height, width, 3)."""
+def render_rgb(simulation: Simulation) -> NDArray[np.uint8]:
+    """The simulation's current state as an RGB array (height, width, 3)."""
+    sim = simulation
     figure = Figure(figsize=(5, 5), dpi=80)
     canvas = FigureCanvasAgg(figure)
     ax = figure.add_subplot()
-    draw_floor(ax, env.scenario, env.route)
-    rows = env.trajectory()
+    draw_floor(ax, sim.scenario, sim.route)
+    rows = sim.trajectory()
     if rows:
-        ax.plot([r["human_x"] for r in rows], [r["human_y"] for r in rows], color="#ff7f0e")
-        ax.plot([r["robot_x"] for r in rows], [r["robot_y"] for r in rows], color="#1f77b4")
-    robot = env.robot_state
-    draw_robot(
-        ax,
-        (robot.x, robot.y, robot.heading),
-        env.robot_params,
-        env.field_diameter,
-        env.emergency_stop,
-    )
-    human_x, human_y, human_heading = env.human_pose
-    draw_human(ax, (human_x, human_y), human_heading, env.human_params)
-    ax.set_title(f"t = {env.sim_time:.1f} s")
+        ax.plot([r.human_x for r in rows], [r.human_y for r in rows], color="#ff7f0e")
+        ax.plot([r.robot_x for r in rows], [r.robot_y for r in rows], color="#1f77b4")
+    robot = sim.robot
+    pose = (robot.x, robot.y, robot.heading)
+    draw_robot(ax, pose, sim.robot_params, sim.field, sim.emergency_stop)
+    human_x, human_y, human_heading = sim.human_pose
+    draw_human(ax, (human_x, human_y), human_heading, sim.human_params)
+    ax.set_title(f"t = {sim.sim_time:.1f} s")
     canvas.draw()  # type: ignore[no-untyped-call]
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()  # type: ignore[no-untyped-call]
 
 
 def animate_episode(
     path: Path,
-    env: AGVEnv,
+    simulation: Simulation,
     title: str = "",
     frame_step: int = 1,
     fps: int = 10,
     last_seconds: float | None = None,
     size: float = 6.0,
 ) -> Path:
-    """Write an animated GIF of the env's recorded trajectory (one frame per 0.2 s sample).
+    """Write an animated GIF of the played episode (one frame per 0.2 s sample).
 
     Args:
         path: The GIF to write.
-        env: An env whose episode has been played (``record_trajectory`` on).
+        simulation: A simulation whose episode has been played.
         title: Shown above every frame, followed by the time.
         frame_step: Use every ``frame_step``-th sample.
         fps: Frames per second of the animation (10 plays twice as fast as real time).
@@ -188,11 +185,11 @@ def animate_episode(
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    every = env.trajectory()
+    every = simulation.trajectory()
     if not every:
-        raise ValueError("the env has no recorded trajectory: play an episode first")
-    since = -np.inf if last_seconds is None else every[-1]["time"] - last_seconds
-    first = next(i for i, row in enumerate(every) if row["time"] >= since)
+        raise ValueError("the simulation has no trajectory: play an episode first")
+    since = -np.inf if last_seconds is None else every[-1].time - last_seconds
+    first = next(i for i, row in enumerate(every) if row.time >= since)
     frames = list(range(first, len(every)))[::-1][::frame_step][::-1]
     figure = Figure(figsize=(size, size), dpi=80)
     FigureCanvasAgg(figure)
@@ -200,7 +197,7 @@ def animate_episode(
 
     def draw(index: int) -> list[Any]:
         ax.clear()
-        draw_state(ax, env, every[: frames[index] + 1], title)
+        draw_state(ax, simulation, every[: frames[index] + 1], title)
         return []
 
     animation = FuncAnimation(figure, draw, frames=len(frames), blit=False)
@@ -209,29 +206,27 @@ def animate_episode(
     return path
 
 
-def draw_state(ax: Axes, env: AGVEnv, rows: Sequence[dict[str, Any]], title: str = "") -> None:
+def draw_state(
+    ax: Axes, simulation: Simulation, rows: Sequence[TrajectorySample], title: str = ""
+) -> None:
     """The floor, both tracks up to the last of ``rows`` and the poses at that sample."""
-    draw_floor(ax, env.scenario, env.route)
-    ax.plot([r["robot_x"] for r in rows], [r["robot_y"] for r in rows], color="#1f77b4")
-    ax.plot([r["human_x"] for r in rows], [r["human_y"] for r in rows], color="#ff7f0e")
+    sim = simulation
+    draw_floor(ax, sim.scenario, sim.route)
+    ax.plot([r.robot_x for r in rows], [r.robot_y for r in rows], color="#1f77b4")
+    ax.plot([r.human_x for r in rows], [r.human_y for r in rows], color="#ff7f0e")
     row = rows[-1]
-    draw_robot(
-        ax,
-        (row["robot_x"], row["robot_y"], row["robot_heading"]),
-        env.robot_params,
-        env.field_diameter,
-        row["emergency_stop"],
-    )
-    if row["predicted_human"] is not None:
-        ax.plot(*np.asarray(row["predicted_human"]).reshape(-1, 2).T, ":", color="#ff7f0e")
-    draw_human(ax, (row["human_x"], row["human_y"]), row["human_heading"], env.human_params)
-    stop = ", EMERGENCY STOP" if row["emergency_stop"] else ""
-    ax.set_title(f"{title}  t = {row['time']:.1f} s{stop}".strip(), fontsize=9)
+    pose = (row.robot_x, row.robot_y, row.robot_heading)
+    draw_robot(ax, pose, sim.robot_params, sim.field, row.emergency_stop)
+    if row.predicted_human is not None:
+        ax.plot(*np.asarray(row.predicted_human).reshape(-1, 2).T, ":", color="#ff7f0e")
+    draw_human(ax, (row.human_x, row.human_y), row.human_heading, sim.human_params)
+    stop = ", EMERGENCY STOP" if row.emergency_stop else ""
+    ax.set_title(f"{title}  t = {row.time:.1f} s{stop}".strip(), fontsize=9)
 
 
 def plot_frames(
     path: Path,
-    env: AGVEnv,
+    simulation: Simulation,
     times: Sequence[float],
     captions: Sequence[str] | None = None,
     zoom: float | None = 4.0,
@@ -240,24 +235,24 @@ def plot_frames(
 
     Args:
         path: The PNG to write.
-        env: An env whose episode has been played.
+        simulation: A simulation whose episode has been played.
         times: The instants, in s; each frame shows the last sample at or before it.
         captions: One caption per frame (default: the time).
         zoom: Half the width of the window around the robot, in m (None: the whole floor).
     """
-    rows = env.trajectory()
+    rows = simulation.trajectory()
     if not rows:
-        raise ValueError("the env has no recorded trajectory: play an episode first")
+        raise ValueError("the simulation has no trajectory: play an episode first")
     figure = Figure(figsize=(3.2 * len(times), 3.4), dpi=90)
     for column, moment in enumerate(times):
-        upto = [row for row in rows if row["time"] <= moment + 1e-9] or rows[:1]
+        upto = [row for row in rows if row.time <= moment + 1e-9] or rows[:1]
         ax = figure.add_subplot(1, len(times), column + 1)
         caption = captions[column] if captions is not None else ""
-        draw_state(ax, env, upto, caption)
+        draw_state(ax, simulation, upto, caption)
         if zoom is not None:
             centre = upto[-1]
-            ax.set_xlim(centre["robot_x"] - zoom, centre["robot_x"] + zoom)
-            ax.set_ylim(centre["robot_y"] - zoom, centre["robot_y"] + zoom)
+            ax.set_xlim(centre.robot_x - zoom, centre.robot_x + zoom)
+            ax.set_ylim(centre.robot_y - zoom, centre.robot_y + zoom)
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path)

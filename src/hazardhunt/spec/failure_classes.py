@@ -1,11 +1,12 @@
 """Failure classes (SPEC 6): which mechanism led to an unsafe contact.
 
 A failure's class is read from the episode's trajectory (sampled every 0.2 s, see
-``AGVEnv.trajectory``) and its summary, at and before the contact. The features are the robot
-face that was touched, the safety layer's history, and whether the human was moving at contact
-(faster than ``moving_speed``, from the last two samples).
+:class:`~hazardhunt.spec.episode.TrajectorySample`) and its summary, at and before the contact.
+The features are the robot face that was touched, the safety layer's history, and whether the
+human was moving at contact (faster than ``moving_speed``, from the last two samples).
 
-With a protective field (10 classes; the study counted 9, with both sides of fewer mechanisms):
+With a protective field (a half-disc, side bands or both; 10 classes; the study counted 9, with
+both sides of fewer mechanisms):
 
 - ``side-left/no-stop``, ``side-right/no-stop``: the field never triggered; the human walked
   into the uncovered side.
@@ -66,10 +67,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.geometry import to_body_frame
 
@@ -79,8 +82,6 @@ OTHER = "other"
 SIDES = ("left", "right")
 FACES = ("front", "left", "right", "rear")
 MOTIONS = ("moving", "standing")
-
-Row = Mapping[str, Any]
 
 
 @runtime_checkable
@@ -92,15 +93,14 @@ class FailureClassifier(Protocol):
         """Short name of the taxonomy, recorded with the classes."""
         ...
 
-    def classes_for(self, field_diameter: float | None) -> tuple[str, ...]:
-        """Every class ``classify`` can return for this field diameter (m, None: no field),
-        ``other`` last."""
+    def classes_for(self, field: FieldShape) -> tuple[str, ...]:
+        """Every class ``classify`` can return under this protective field, ``other`` last."""
         ...
 
     def classify(
-        self, trajectory: Sequence[Row], summary: Mapping[str, Any], field_diameter: float | None
+        self, trajectory: Sequence[TrajectorySample], summary: EpisodeSummary, field: FieldShape
     ) -> str:
-        """The class of one episode, from its trajectory rows and its summary."""
+        """The class of one failure, from its trajectory, its summary and the field."""
         ...
 
 
@@ -118,8 +118,8 @@ class MechanismClassifier:
     edge_tolerance: float = 0.05
     """Allowance beyond the front face for an entry over the straight edge, in m."""
 
-    def classes_for(self, field_diameter: float | None) -> tuple[str, ...]:
-        if field_diameter is None:
+    def classes_for(self, field: FieldShape) -> tuple[str, ...]:
+        if not field.covers_anything:
             return (*(f"{face}/{motion}" for face in FACES for motion in MOTIONS), OTHER)
         return (
             *(f"side-{side}/no-stop" for side in SIDES),
@@ -131,17 +131,17 @@ class MechanismClassifier:
         )
 
     def classify(
-        self, trajectory: Sequence[Row], summary: Mapping[str, Any], field_diameter: float | None
+        self, trajectory: Sequence[TrajectorySample], summary: EpisodeSummary, field: FieldShape
     ) -> str:
-        face = summary.get("contact_face")
+        face = summary.contact_face
         if face not in FACES or not trajectory:
             return OTHER
         motion = "moving" if human_speed_at_end(trajectory) > self.moving_speed else "standing"
-        if field_diameter is None:
+        if not field.covers_anything:
             return f"{face}/{motion}"
-        if not any(row["emergency_stop"] for row in trajectory):
+        if not any(row.emergency_stop for row in trajectory):
             return f"side-{face}/no-stop" if face in SIDES else OTHER
-        if trajectory[-1]["emergency_stop"]:
+        if trajectory[-1].emergency_stop:
             if self._entered_over_edge(trajectory):
                 return f"edge-entry/{motion}"
             if face == "front":
@@ -151,47 +151,40 @@ class MechanismClassifier:
             return f"side-{face}/restarted"
         return OTHER
 
-    def _entered_over_edge(self, trajectory: Sequence[Row]) -> bool:
+    def _entered_over_edge(self, trajectory: Sequence[TrajectorySample]) -> bool:
         """Whether the human's last entry into the field came from beside the robot."""
         entry = last_field_entry(trajectory)
         if entry is None:
             return False
         row = trajectory[entry]
         forward, _ = to_body_frame(
-            np.array([row["human_x"], row["human_y"]]),
-            row["robot_x"],
-            row["robot_y"],
-            row["robot_heading"],
+            np.array([row.human_x, row.human_y]), row.robot_x, row.robot_y, row.robot_heading
         )
         return forward <= self.robot.length / 2 + self.edge_tolerance
 
-    def _drove_after_release(self, trajectory: Sequence[Row]) -> bool:
+    def _drove_after_release(self, trajectory: Sequence[TrajectorySample]) -> bool:
         """Whether the robot drove again after the last emergency stop was released."""
-        last_stop = max(i for i, row in enumerate(trajectory) if row["emergency_stop"])
-        return any(
-            row["robot_speed"] >= self.standstill_speed for row in trajectory[last_stop + 1 :]
-        )
+        last_stop = max(i for i, row in enumerate(trajectory) if row.emergency_stop)
+        return any(row.robot_speed >= self.standstill_speed for row in trajectory[last_stop + 1 :])
 
 
-def human_speed_at_end(trajectory: Sequence[Row]) -> float:
+def human_speed_at_end(trajectory: Sequence[TrajectorySample]) -> float:
     """The human's speed between the last two samples with distinct times, in m/s (0 for one)."""
     last = trajectory[-1]
     for previous in reversed(trajectory[:-1]):
-        elapsed = last["time"] - previous["time"]
+        elapsed = last.time - previous.time
         if elapsed > 0:
-            distance = math.hypot(
-                last["human_x"] - previous["human_x"], last["human_y"] - previous["human_y"]
-            )
+            distance = math.hypot(last.human_x - previous.human_x, last.human_y - previous.human_y)
             return float(distance / elapsed)
     return 0.0
 
 
-def last_field_entry(trajectory: Sequence[Row]) -> int | None:
+def last_field_entry(trajectory: Sequence[TrajectorySample]) -> int | None:
     """Index of the last sample where ``human_in_field`` turned true (None: never in it)."""
     entry = None
     was_in_field = False
     for index, row in enumerate(trajectory):
-        in_field = bool(row["human_in_field"])
+        in_field = bool(row.human_in_field)
         if in_field and not was_in_field:
             entry = index
         was_in_field = in_field
@@ -199,9 +192,9 @@ def last_field_entry(trajectory: Sequence[Row]) -> int | None:
 
 
 def classify_failures(
-    trajectories: Mapping[int, Sequence[Row]],
-    summaries: Mapping[int, Mapping[str, Any]],
-    field_diameter: float | None,
+    trajectories: Mapping[int, Sequence[TrajectorySample]],
+    summaries: Mapping[int, EpisodeSummary],
+    field: FieldShape,
     classifier: FailureClassifier | None = None,
 ) -> dict[int, str]:
     """The class of every episode of ``trajectories`` (by episode id), ``other`` included.
@@ -211,6 +204,6 @@ def classify_failures(
     """
     chosen: FailureClassifier = classifier if classifier is not None else MechanismClassifier()
     return {
-        episode: chosen.classify(trajectory, summaries[episode], field_diameter)
+        episode: chosen.classify(trajectory, summaries[episode], field)
         for episode, trajectory in trajectories.items()
     }

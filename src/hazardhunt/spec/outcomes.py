@@ -39,7 +39,7 @@ def episode_outcome(
     verdict: ContactVerdict,
     goal_reached: bool,
     sim_time: float,
-    stop_held_for: float,
+    emergency_stop_duration: float,
     sut_error: bool,
     params: TerminationParams = TerminationParams(),
 ) -> Outcome | None:
@@ -56,7 +56,7 @@ def episode_outcome(
     if goal_reached:
         return Outcome.GOAL
     # Compare with a tolerance: time accumulates in float steps of 0.05 s.
-    if stop_held_for >= params.stall_duration - 1e-9:
+    if emergency_stop_duration >= params.stall_duration - 1e-9:
         return Outcome.STALL
     if sim_time >= params.episode_duration - 1e-9:
         return Outcome.TIMEOUT

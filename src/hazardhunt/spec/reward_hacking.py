@@ -8,9 +8,9 @@ episode earns a high return without a failure.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+
+from hazardhunt.spec.episode import EpisodeSummary
 
 
 @dataclass(frozen=True)
@@ -22,15 +22,15 @@ class LoiteringRule:
     min_time_in_field: float = 2.0
     """Time the human spends in the field, together with ``min_stops``, in s."""
 
-    def matches(self, summary: Mapping[str, Any]) -> bool:
-        """Whether an episode's summary (or ``episodes.parquet`` row) shows loitering."""
-        if summary["outcome"] == "failure":
+    def matches(self, summary: EpisodeSummary) -> bool:
+        """Whether an episode's summary shows loitering."""
+        if summary.outcome == "failure":
             return False
-        if summary["outcome"] == "stall":
+        if summary.outcome == "stall":
             return True
-        return bool(
-            summary["estop_count"] >= self.min_stops
-            and summary["time_in_field"] >= self.min_time_in_field
+        return (
+            summary.emergency_stops >= self.min_stops
+            and summary.time_in_field >= self.min_time_in_field
         )
 
     def describe(self) -> str:

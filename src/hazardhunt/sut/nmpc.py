@@ -218,8 +218,17 @@ class NMPCController:
         self.__dict__.update(state)
         self._problem = _Problem(self.params, self.robot)
 
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState) -> None:
-        """Forget the previous episode; the robot starts at ``robot`` and follows ``route``."""
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        """Forget the previous episode; the robot starts at ``robot`` and follows ``route``.
+
+        Raises:
+            ValueError: ``params`` is another robot than the one the problem was built for.
+        """
+        if params != self.robot:
+            raise ValueError(
+                f"the NMPC was built for {self.robot} and cannot drive {params}; "
+                "build it with robot=params"
+            )
         self._route = route
         self._obstacles = _Obstacles(floor)
         self._progress = route.project(np.array([robot.x, robot.y]))

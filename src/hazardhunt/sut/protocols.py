@@ -1,4 +1,8 @@
-"""The plug-in points of the system under test: what a controller and a safety layer look like."""
+"""The plug-in points of the system under test: what a controller and a safety layer look like.
+
+:class:`~hazardhunt.world.bodies.RobotState` and ``RobotParams`` are re-exported here, as a
+controller needs them.
+"""
 
 from __future__ import annotations
 
@@ -9,25 +13,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.sut.route import Route
+from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.floor import FloorMap
 
 FloatArray = NDArray[np.float64]
 
-
-@dataclass(frozen=True)
-class RobotState:
-    """The robot as the controller measures it."""
-
-    x: float
-    """Position east, in m (centre of the robot's rectangle)."""
-    y: float
-    """Position north, in m."""
-    heading: float
-    """Heading, in rad, counter-clockwise from east."""
-    speed: float
-    """Forward speed, in m/s."""
-    yaw_rate: float
-    """Turn rate, in rad/s."""
+__all__ = [
+    "ControlCommand",
+    "Controller",
+    "FloatArray",
+    "RobotParams",
+    "RobotState",
+    "SafetyLayer",
+    "SafetyStatus",
+    "TrackedHuman",
+]
 
 
 @dataclass(frozen=True)
@@ -83,8 +83,15 @@ class Controller(Protocol):
     control_period: float
     """Time between two calls, in s."""
 
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState) -> None:
-        """Forget the previous episode; the robot starts at ``robot`` and follows ``route``."""
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        """Forget the previous episode; the robot starts at ``robot`` and follows ``route``.
+
+        Args:
+            floor: The static map (walls, shelves, camera-blind zones).
+            route: The reference path from the start through the waypoints to the goal.
+            robot: The robot's state at the start.
+            params: The robot's dimensions and limits (size, speeds, accelerations).
+        """
         ...
 
     def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
@@ -120,6 +127,9 @@ class SafetyLayer(Protocol):
         """Forget the previous episode."""
         ...
 
-    def update(self, robot: RobotState, human_position: FloatArray, radius: float) -> SafetyStatus:
-        """Check the protective field at one physics step, for a human disc of ``radius`` m."""
+    def update(
+        self, time: float, robot: RobotState, human_position: FloatArray, radius: float
+    ) -> SafetyStatus:
+        """Check the protective field at one physics step (simulated ``time`` in s), for a
+        human disc of ``radius`` m."""
         ...

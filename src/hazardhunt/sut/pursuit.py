@@ -39,8 +39,9 @@ class PursuitController:
         self._route: Route | None = None
         self._progress = 0.0
 
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState) -> None:
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
         """Start following ``route`` from the robot's position."""
+        self.robot = params
         self._route = route
         self._progress = route.project(np.array([robot.x, robot.y]))
 

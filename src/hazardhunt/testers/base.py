@@ -1,8 +1,8 @@
-"""What every search method implements, and the env wrapper that records each episode."""
+"""What every search method implements, and the recorder that makes each episode the run's."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -12,6 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
+from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
 
 
@@ -19,29 +21,33 @@ from hazardhunt.spec.rewards import RewardKind
 class EpisodeRecord:
     """One finished episode, as the run stores it."""
 
-    index: int
+    episode: int
     """Position of the episode in the run, from 0."""
-    summary: dict[str, Any]
-    """The env's episode summary (outcome, return, maximum risk, ...)."""
-    actions: NDArray[np.float32]
-    """Shape (decision steps, 2): the actions the env received, enough to replay it."""
-    trajectory: list[dict[str, Any]]
-    """The env's trajectory (kept for failures; empty otherwise)."""
+    result: EpisodeResult
+    """What the episode amounts to, and the actions that replay it (its trajectory is kept
+    for failures only)."""
+
+
+def is_failure(summary: EpisodeSummary) -> bool:
+    """Whether an episode ended in an unsafe contact: the episodes whose trajectory is kept."""
+    return summary.outcome == "failure"
 
 
 class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
     """Hands every finished episode to ``on_episode`` and counts them.
 
-    Testers drive this wrapper and stop once ``episodes_done`` reaches their budget.
+    It wraps an :class:`~hazardhunt.env.agv.AGVEnv` (or a wrapper of one).
+
+    A learning tester steps this wrapper like any Gymnasium env; an episode-level tester plays
+    whole episodes with :meth:`evaluate`. Either stops once ``episodes_done`` reaches its
+    budget.
     """
 
     def __init__(
         self,
         env: gym.Env[Any, Any],
         on_episode: Callable[[EpisodeRecord], None],
-        keep_trajectory: Callable[[dict[str, Any]], bool] = lambda summary: (
-            summary["outcome"] == "failure"
-        ),
+        keep_trajectory: Callable[[EpisodeSummary], bool] = is_failure,
     ) -> None:
         super().__init__(env)
         self.on_episode = on_episode
@@ -49,58 +55,72 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         self.episodes_done = 0
 
     @property
-    def agv(self) -> AGVEnv:
-        """The AGV environment underneath."""
+    def simulation(self) -> Simulation:
+        """The simulation underneath."""
         env = self.env.unwrapped
         assert isinstance(env, AGVEnv)
-        return env
+        return env.simulation
+
+    @property
+    def horizon(self) -> int:
+        """Decisions in an episode that runs its full duration: the length of an action
+        sequence for :meth:`evaluate`."""
+        return self.simulation.horizon
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
         if terminated or truncated:
-            self.record(*finished_episode(self.agv, info, self.keep_trajectory))
+            self.record(self.simulation.result(self.keep_trajectory))
         return observation, float(reward), terminated, truncated, info
 
-    def record(
-        self,
-        summary: dict[str, Any],
-        actions: NDArray[np.float32],
-        trajectory: list[dict[str, Any]],
-    ) -> None:
+    def evaluate(
+        self, actions: Sequence[Action] | NDArray[np.floating[Any]] | Policy
+    ) -> EpisodeResult:
+        """Play one episode from the scenario's start and record it as the run's next one.
+
+        Args:
+            actions: Up to :attr:`horizon` normalised actions, played open loop (an episode
+                still going when they run out is recorded as it stands, outcome None), or a
+                policy that chooses each action from the simulation's state.
+        """
+        result = self.simulation.simulate(actions, self.keep_trajectory)
+        self.record(result)
+        return result
+
+    def record(self, result: EpisodeResult) -> None:
         """Hand a finished episode to ``on_episode`` as the run's next one (also for episodes
         that copies of the env ran in worker processes)."""
-        record = EpisodeRecord(self.episodes_done, summary, actions, trajectory)
+        record = EpisodeRecord(self.episodes_done, result)
         self.episodes_done += 1
         self.on_episode(record)
 
 
-def finished_episode(
-    agv: AGVEnv, info: dict[str, Any], keep_trajectory: Callable[[dict[str, Any]], bool]
-) -> tuple[dict[str, Any], NDArray[np.float32], list[dict[str, Any]]]:
-    """Summary, actions and (when ``keep_trajectory`` says so) trajectory of the episode that
-    ``agv`` has just ended with ``info``."""
-    summary = info["summary"]
-    trajectory = agv.trajectory() if keep_trajectory(summary) else []
-    return summary, agv.episode_actions, trajectory
-
-
 @runtime_checkable
 class Tester(Protocol):
-    """A search method: chooses the human's actions, episode after episode, within a budget."""
+    """A search method: chooses the human's actions, episode after episode, within a budget.
+
+    A tester that learns from the env's per-step reward also declares ``reward`` (``acc`` or
+    ``max``); without it the env gives the maximum reward, which episode-level searchers,
+    which score whole episodes, do not read.
+    """
 
     name: str
     """The tester's name (``random``, ``ppo-acc``, ...)."""
-    reward: RewardKind
-    """The reward the env gives it."""
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         """Drive ``env`` until ``env.episodes_done`` reaches ``episodes``, then return.
 
-        The first reset must pass the run's seed; later resets need none (the env is
-        deterministic). Learning testers keep learning for the whole budget.
+        Step it as a Gymnasium env (the first reset passes the run's seed) or play whole
+        episodes with ``env.evaluate``. Learning testers keep learning for the whole budget.
         """
         ...
 
     def save(self, directory: Path) -> None:
         """Write whatever the tester learned (e.g. a policy checkpoint) into ``directory``."""
         ...
+
+
+def tester_reward(tester: Tester) -> RewardKind:
+    """The reward the env gives ``tester``: its own ``reward``, else the maximum reward."""
+    reward: RewardKind = getattr(tester, "reward", "max")
+    return reward

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import inspect
 import json
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -23,8 +22,9 @@ from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrappe
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.base import EpisodeRecorder, finished_episode
+from hazardhunt.testers.base import EpisodeRecorder
 
 RESERVED_PARAMETERS = frozenset({"policy", "env", "seed", "device", "verbose", "_init_setup_model"})
 """PPO arguments the tester sets itself: the run owns the env and the seed, and SPEC fixes
@@ -126,12 +126,10 @@ class PPOTester:
                 verbose=0,
                 **self.params,
             )
-            agv = env.agv
-            most_steps = math.ceil(agv.termination.episode_duration / agv.decision_period)
             # SB3 needs a length; this bound (every episode timing out) is never reached
             # because the callback ends learning at the episode budget.
             self.model.learn(
-                total_timesteps=episodes * most_steps,
+                total_timesteps=episodes * env.horizon,
                 callback=StopAtEpisodeBudget(env, episodes),
             )
         finally:
@@ -176,7 +174,7 @@ class _EpisodeReporter(gym.Wrapper[Any, Any, Any, Any]):
     """In a worker process: adds the finished episode's record to the info of its last step."""
 
     def __init__(
-        self, env: gym.Env[Any, Any], keep_trajectory: Callable[[dict[str, Any]], bool]
+        self, env: gym.Env[Any, Any], keep_trajectory: Callable[[EpisodeSummary], bool]
     ) -> None:
         super().__init__(env)
         self.keep_trajectory = keep_trajectory
@@ -186,7 +184,7 @@ class _EpisodeReporter(gym.Wrapper[Any, Any, Any, Any]):
         if terminated or truncated:
             agv = self.env.unwrapped
             assert isinstance(agv, AGVEnv)
-            info = {**info, _EPISODE: finished_episode(agv, info, self.keep_trajectory)}
+            info = {**info, _EPISODE: agv.simulation.result(self.keep_trajectory)}
         return observation, float(reward), terminated, truncated, info
 
 
@@ -194,7 +192,7 @@ class _ReporterFactory:
     """Builds a worker's env from a pickled copy of the run's env."""
 
     def __init__(self, recorder: EpisodeRecorder) -> None:
-        self.env = recorder.agv
+        self.env = recorder.env.unwrapped
         self.keep_trajectory = recorder.keep_trajectory
 
     def __call__(self) -> gym.Env[Any, Any]:
@@ -218,5 +216,5 @@ class RecordingVecEnv(VecEnvWrapper):
         for info in infos:
             episode = info.pop(_EPISODE, None)
             if episode is not None and self.recorder.episodes_done < self.budget:
-                self.recorder.record(*episode)
+                self.recorder.record(episode)
         return observations, np.asarray(rewards), dones, infos

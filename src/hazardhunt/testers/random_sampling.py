@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from hazardhunt.env.agv import AGVEnv
-from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.testers.base import EpisodeRecorder
 
 
@@ -22,7 +21,6 @@ class RandomTester:
     """Uniform sampling over the action space, restricted to obstacle-free actions."""
 
     name = "random"
-    reward: RewardKind = "max"
 
     def __init__(self, seed: int, attempts: int = 20) -> None:
         """Args:
@@ -34,22 +32,19 @@ class RandomTester:
         self.rng = np.random.default_rng(seed)
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
-        agv = env.agv
-        env.reset(seed=self.seed)
         while env.episodes_done < episodes:
-            action = self.choose(agv, agv.human_pose)
-            _, _, terminated, truncated, _ = env.step(action)
-            if (terminated or truncated) and env.episodes_done < episodes:
-                env.reset()
+            env.evaluate(self.choose)
 
-    def choose(self, agv: AGVEnv, pose: tuple[float, float, float]) -> NDArray[np.float32]:
-        """One obstacle-free action in ``agv`` for a human at ``pose`` (x, y in m, heading in
-        rad)."""
+    def choose(self, simulation: Simulation) -> NDArray[np.float32]:
+        """One obstacle-free action for the human where it stands in ``simulation``."""
+        sim = simulation
         for _ in range(self.attempts):
             action = self.rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
-            speed, turn_rate = agv.decode_action(action)
-            path = human_path(pose, speed, turn_rate, agv.decision_period, agv.physics_step)
-            if agv.scenario.floor.discs_clear(path, agv.human_params.radius):
+            speed, turn_rate = sim.decode_action(action)
+            path = human_path(
+                sim.human_pose, speed, turn_rate, sim.decision_period, sim.physics_step
+            )
+            if sim.scenario.floor.discs_clear(path, sim.human_params.radius):
                 return action
         # Turning on the spot is always clear, and lets a human facing a wall turn away.
         return np.array([-1.0, self.rng.uniform(-1.0, 1.0)], dtype=np.float32)

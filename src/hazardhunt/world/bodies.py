@@ -30,10 +30,31 @@ class RobotParams:
     goal_tolerance: float = 0.3
     """Distance to the goal at which the robot has arrived, in m."""
 
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, not {value!r}")
+
     @property
     def half_diagonal(self) -> float:
         """Radius of the smallest disc around the rectangle, in m."""
         return math.hypot(self.length / 2, self.width / 2)
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """The robot's pose and speeds: what the physics advances and the controller measures."""
+
+    x: float
+    """Position east, in m (centre of the robot's rectangle)."""
+    y: float
+    """Position north, in m."""
+    heading: float
+    """Heading, in rad, counter-clockwise from east."""
+    speed: float
+    """Forward speed, in m/s."""
+    yaw_rate: float
+    """Turn rate, in rad/s."""
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import FloatArray
 
@@ -61,29 +61,14 @@ def step_human(
     return HumanMotion(position.copy(), new_heading, np.zeros(2), True)
 
 
-@dataclass(frozen=True)
-class RobotMotion:
-    """The robot after one physics step."""
-
-    x: float
-    y: float
-    heading: float
-    speed: float
-    yaw_rate: float
-
-
 def step_robot(
-    x: float,
-    y: float,
-    heading: float,
-    speed: float,
-    yaw_rate: float,
+    state: RobotState,
     commanded_speed: float,
     commanded_yaw_rate: float,
     dt: float,
     params: RobotParams,
     emergency_stop: bool = False,
-) -> RobotMotion:
+) -> RobotState:
     """Advance the robot for ``dt`` seconds towards the commanded speeds.
 
     The speeds move towards the command no faster than the acceleration limits allow and stay
@@ -91,6 +76,7 @@ def step_robot(
     and stops turning at once. Position and heading integrate the mean speeds of the step (exact
     for straight motion under constant acceleration).
     """
+    speed, yaw_rate, heading = state.speed, state.yaw_rate, state.heading
     if emergency_stop:
         new_speed = max(speed - params.emergency_deceleration * dt, 0.0)
         new_yaw_rate = 0.0
@@ -104,9 +90,9 @@ def step_robot(
     mean_speed = 0.5 * (speed + new_speed)
     mean_yaw_rate = 0.5 * (yaw_rate + new_yaw_rate)
     mid_heading = heading + 0.5 * mean_yaw_rate * dt
-    return RobotMotion(
-        x=x + mean_speed * dt * math.cos(mid_heading),
-        y=y + mean_speed * dt * math.sin(mid_heading),
+    return RobotState(
+        x=state.x + mean_speed * dt * math.cos(mid_heading),
+        y=state.y + mean_speed * dt * math.sin(mid_heading),
         heading=heading + mean_yaw_rate * dt,
         speed=new_speed,
         yaw_rate=new_yaw_rate,

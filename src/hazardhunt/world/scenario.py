@@ -51,16 +51,6 @@ class Pose:
 
 
 @dataclass(frozen=True)
-class FieldShape:
-    """A protective-field shape: a half-disc ahead of the robot and bands along its sides."""
-
-    diameter: float | None
-    """Diameter of the half-disc ahead of the front face, in m (None: no front field)."""
-    side_margin: float = 0.0
-    """Width of the bands along both sides, in m (0: the sides are not covered)."""
-
-
-@dataclass(frozen=True)
 class Scenario:
     """An initial state on a floor: where the robot starts and must go, where the human starts."""
 
@@ -75,8 +65,9 @@ class Scenario:
     description: str = ""
     source: str = ""
     """The file the scenario was loaded from."""
-    fields: dict[str, FieldShape] = dataclass_field(default_factory=dict)
-    """Field settings the scenario defines besides the built-in ones, by name."""
+    fields: dict[str, dict[str, Any]] = dataclass_field(default_factory=dict)
+    """Field settings the scenario defines besides the built-in ones, by name: each its
+    ``[fields.NAME]`` table, which :func:`hazardhunt.sut.safety_layer.field_shape` reads."""
 
 
 class _Strict(BaseModel):
@@ -149,28 +140,13 @@ class _HumanSpec(_Strict):
     start: _PoseSpec
 
 
-class _FieldSpec(_Strict):
-    diameter: float | None = Field(default=None, gt=0)
-    side_margin: float = Field(default=0.0, ge=0)
-
-
 class _ScenarioSpec(_Strict):
     name: str
     description: str = ""
     map: str | _MapSpec
     robot: _RobotSpec
     human: _HumanSpec
-    fields: dict[str, _FieldSpec] = {}
-
-    @field_validator("fields")
-    @classmethod
-    def _no_builtin_names(cls, fields: dict[str, _FieldSpec]) -> dict[str, _FieldSpec]:
-        from hazardhunt.sut.safety_layer import FIELD_SETTINGS
-
-        for name in fields:
-            if name in FIELD_SETTINGS:
-                raise ValueError(f"{name!r} is a built-in field setting and cannot be redefined")
-        return fields
+    fields: dict[str, dict[str, Any]] = {}
 
 
 def builtin_scenario_path(name: str) -> Path:
@@ -230,10 +206,7 @@ def _build_scenario(spec: _ScenarioSpec, floor: FloorMap, path: Path) -> Scenari
         goal=np.array([spec.robot.goal.x, spec.robot.goal.y]),
         human_start=_pose(spec.human.start),
         source=str(path),
-        fields={
-            name: FieldShape(field.diameter, field.side_margin)
-            for name, field in spec.fields.items()
-        },
+        fields={name: dict(table) for name, table in spec.fields.items()},
     )
     _check_placement(scenario, path)
     return scenario
@@ -300,22 +273,6 @@ def _check_placement(scenario: Scenario, path: Path) -> None:
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
             )
-
-
-def field_shape(scenario: Scenario, setting: str) -> FieldShape:
-    """The shape of a field setting: one the scenario defines, or a built-in one.
-
-    Raises:
-        ValueError: Naming the settings there are.
-    """
-    from hazardhunt.sut.safety_layer import FIELD_SETTINGS
-
-    if setting in scenario.fields:
-        return scenario.fields[setting]
-    if setting in FIELD_SETTINGS:
-        return FieldShape(FIELD_SETTINGS[setting])
-    known = [*FIELD_SETTINGS, *scenario.fields]
-    raise ValueError(f"unknown field {setting!r}: use one of {', '.join(known)}")
 
 
 def scenario_data(name_or_path: str | Path) -> dict[str, Any]:

@@ -1,0 +1,10 @@
+"""The simulation core: one decision or one whole episode of the human against the SUT."""
+
+from hazardhunt.sim.simulation import (
+    DecisionReport,
+    EpisodeResult,
+    Policy,
+    Simulation,
+)
+
+__all__ = ["DecisionReport", "EpisodeResult", "Policy", "Simulation"]

@@ -1,0 +1,607 @@
+"""The simulation core: the workplace, the system under test and the safety specification.
+
+A :class:`Simulation` advances one decision of the human at a time (:meth:`Simulation.decide`)
+or plays a whole episode (:meth:`Simulation.simulate`) from a sequence of actions or a policy.
+The Gymnasium environment, the testers, replay and regression cases all drive this one loop.
+
+One decision holds the human's (speed, turn rate) for the decision period while the physics
+(0.05 s), the tracking and controller (0.2 s) and the safety layer (every physics step) run
+underneath. Within one physics step the order is: (1) at a control instant, the cameras track
+the human and the controller computes its command; (2) the safety layer checks its field;
+(3) robot and human move; (4) contact, clearance, risk and termination are evaluated.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySample
+from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
+from hazardhunt.spec.risk import RiskParams, risk
+from hazardhunt.spec.safety import ContactVerdict, SafetySpecParams, judge_contact
+from hazardhunt.sut.protocols import ControlCommand, Controller, SafetyLayer
+from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
+from hazardhunt.sut.safety_layer import FieldShape, LaserSafetyLayer, field_shape
+from hazardhunt.sut.tracking import HumanTracker
+from hazardhunt.world.bodies import HumanParams, RobotParams, RobotState
+from hazardhunt.world.geometry import (
+    disc_rectangle_clearance,
+    point_rectangle_clearance,
+    rectangle_face,
+    to_body_frame,
+)
+from hazardhunt.world.kinematics import step_human, step_robot
+from hazardhunt.world.scenario import Scenario, ScenarioError, load_scenario
+
+ROUTE_MARGIN = 0.25
+"""Clearance the reference route keeps from obstacles beyond the robot's half width, in m."""
+
+TERMINAL_OUTCOMES = frozenset(
+    {Outcome.GOAL, Outcome.FAILURE, Outcome.SAFE_CONTACT, Outcome.STALL, Outcome.SUT_ERROR}
+)
+"""Outcomes that terminate an episode; a timeout truncates it."""
+
+Action = Sequence[float] | NDArray[np.floating[Any]]
+"""The human's normalised action: (speed, turn rate), each in [-1, 1]."""
+Policy = Callable[["Simulation"], Action]
+"""Chooses the human's next action from the simulation's current state."""
+
+_NO_COMMAND = ControlCommand(speed=0.0, yaw_rate=0.0, status="not started")
+
+
+@dataclass(frozen=True)
+class DecisionReport:
+    """What happened during one decision of the human."""
+
+    risk: float = 0.0
+    """The largest risk of the decision's physics steps."""
+    risk_sum: float = 0.0
+    """The risk summed over the decision's physics steps."""
+    contact: bool = False
+    """Human and robot touched."""
+    unsafe: bool = False
+    """The contact was unsafe (a failure)."""
+    contact_verdict: str = ContactVerdict.NONE.value
+    """How the contact was judged (see :class:`~hazardhunt.spec.safety.ContactVerdict`)."""
+    controller_failures: int = 0
+    """Failed controller commands within the decision."""
+    outcome: str | None = None
+    """How the episode ended in this decision; None while it goes on."""
+
+    @property
+    def terminated(self) -> bool:
+        """The episode ended by termination (anything but a timeout)."""
+        return self.outcome is not None and Outcome(self.outcome) in TERMINAL_OUTCOMES
+
+    @property
+    def truncated(self) -> bool:
+        """The episode ran out of time."""
+        return self.outcome == Outcome.TIMEOUT.value
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """A played episode: what it amounts to, what it cost, and what replays it."""
+
+    summary: EpisodeSummary
+    timing: EpisodeTiming
+    actions: NDArray[np.float32]
+    """Shape (decisions, 2): the normalised actions played, enough to replay the episode."""
+    risks: NDArray[np.float64]
+    """The risk at every physics step."""
+    trajectory: tuple[TrajectorySample, ...] | None = None
+    """The episode at every control instant and at its end, when it was kept."""
+
+    @property
+    def outcome(self) -> str | None:
+        """How the episode ended; None when the actions ran out first."""
+        return self.summary.outcome
+
+
+class Simulation:
+    """The simulated human against the robot's control stack, on one scenario's floor."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        field: FieldShape,
+        controller: Controller,
+        safety_layer: SafetyLayer,
+        *,
+        decision_period: float = 2.0,
+        physics_step: float = 0.05,
+        termination: TerminationParams = TerminationParams(),
+        max_failed_commands: int = 5,
+        robot: RobotParams = RobotParams(),
+        human: HumanParams = HumanParams(),
+        risk_params: RiskParams = RiskParams(),
+        safety_spec: SafetySpecParams = SafetySpecParams(),
+    ) -> None:
+        """Assemble a simulation from its parts (:meth:`build` builds them from names).
+
+        Args:
+            scenario: The floor and the initial state.
+            field: The protective field's shape (what the classifier and pictures see).
+            controller: The robot's controller.
+            safety_layer: The safety layer.
+            decision_period: Time the human holds each action, in s; a multiple of the
+                controller's period.
+            physics_step: Physics time step, in s.
+            termination: Episode duration and stall limit.
+            max_failed_commands: Consecutive failed controller commands that end the episode
+                as ``sut_error``.
+            robot: Robot parameters (the controller receives them in ``reset``).
+            human: Human parameters.
+            risk_params: Constants of the risk metric.
+            safety_spec: Thresholds of the safety specification.
+
+        Raises:
+            ScenarioError: No route leads through the scenario's waypoints to its goal.
+            ValueError: The periods do not fit into each other.
+        """
+        self.scenario, self.field = scenario, field
+        self.controller, self.safety_layer = controller, safety_layer
+        self.robot_params, self.human_params = robot, human
+        self.risk_params, self.safety_spec = risk_params, safety_spec
+        self.termination, self.max_failed_commands = termination, max_failed_commands
+        self.physics_step, self.decision_period = physics_step, decision_period
+        try:
+            self.route: Route = plan_route(
+                scenario.floor,
+                scenario.robot_start.position,
+                scenario.waypoints,
+                scenario.goal,
+                robot.width / 2 + ROUTE_MARGIN,
+            )
+        except RoutePlanningError as error:
+            raise ScenarioError(f"{scenario.source}: robot: {error}") from error
+        self.tracker = HumanTracker(scenario.floor)
+        self._control_every = _whole_multiple(
+            controller.control_period, physics_step, "controller period", "physics step"
+        )
+        self._physics_per_decision = self._control_every * _whole_multiple(
+            decision_period, controller.control_period, "decision_period", "controller period"
+        )
+        self._max_steps = round(termination.episode_duration / physics_step)
+        self._started = False
+
+    @classmethod
+    def build(
+        cls,
+        scenario: str | Scenario = "crossing",
+        field: str = "1.25m",
+        decision_period: float = 2.0,
+        *,
+        solver: str = "fatrop",
+        controller: Controller | None = None,
+        safety_layer: SafetyLayer | None = None,
+        robot: RobotParams = RobotParams(),
+        human: HumanParams = HumanParams(),
+        **options: Any,
+    ) -> Simulation:
+        """A simulation from names: the built-in NMPC and laser field unless given others.
+
+        Args:
+            scenario: A built-in scenario name, a scenario file path, or a loaded scenario.
+            field: ``none``, ``1.25m``, ``2m`` or a field setting the scenario defines.
+            decision_period: Time the human holds each action, in s.
+            solver: The NMPC's solver (ignored with ``controller``).
+            controller: The robot's controller; the CasADi NMPC when None.
+            safety_layer: The safety layer; the laser field of ``field`` when None.
+            robot: Robot parameters.
+            human: Human parameters.
+            **options: The remaining keyword arguments of :class:`Simulation`.
+
+        Raises:
+            ScenarioError: The scenario does not load.
+            ValueError: An unknown field setting or solver, or periods that do not fit.
+        """
+        loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        shape = field_shape(loaded, field)
+        if controller is None:
+            from hazardhunt.sut.nmpc import NMPCController, NMPCParams
+
+            params = NMPCParams(solver=solver)  # type: ignore[arg-type]
+            controller = NMPCController(params, robot=robot, human=human)
+        if safety_layer is None:
+            safety_layer = LaserSafetyLayer.for_field(shape, robot)
+        return cls(
+            loaded,
+            shape,
+            controller,
+            safety_layer,
+            decision_period=decision_period,
+            robot=robot,
+            human=human,
+            **options,
+        )
+
+    # ------------------------------------------------------------------ episode
+    @property
+    def horizon(self) -> int:
+        """Decisions in an episode that runs its full duration."""
+        return math.ceil(self.termination.episode_duration / self.decision_period - 1e-9)
+
+    def reset(self) -> None:
+        """Put human and robot at the scenario's initial state."""
+        start = self.scenario.robot_start
+        self.robot = RobotState(start.x, start.y, start.heading, 0.0, 0.0)
+        self.human_position = self.scenario.human_start.position.copy()
+        self.human_heading = self.scenario.human_start.heading
+        self.human_velocity = np.zeros(2)
+        self.emergency_stop = False
+        self.human_in_field = False
+        self.human_visible = True
+        self.outcome: Outcome | None = None
+        self.clearance = self._current_clearance()
+        self.decision_step = 0
+        self._steps = 0
+        self._command = _NO_COMMAND
+        self._stop_steps = 0
+        self._failed_in_a_row = 0
+        self._sut_error = False
+        self._counts = _EpisodeCounts(min_clearance=self.clearance)
+        self._actions: list[NDArray[np.float32]] = []
+        self._risks: list[float] = []
+        self._samples: list[tuple[Any, ...]] = []
+        self._started_at = time.perf_counter()
+        self.safety_layer.reset()
+        self.tracker.reset()
+        self.controller.reset(self.scenario.floor, self.route, self.robot, self.robot_params)
+        self._started = True
+
+    def decide(self, action: Action) -> DecisionReport:
+        """Hold the human's normalised ``action`` for one decision period (or until the
+        episode ends)."""
+        if not self._started:
+            raise RuntimeError("call reset() before playing a decision")
+        if self.outcome is not None:
+            raise RuntimeError(f"the episode has ended ({self.outcome.value}); call reset()")
+        self._actions.append(np.asarray(action, dtype=np.float32).reshape(2).copy())
+        speed, turn_rate = self.decode_action(action)
+        report = _DecisionTally(self._counts.controller_failures)
+        outcome = None
+        for _ in range(self._physics_per_decision):
+            outcome = self._physics(speed, turn_rate, report)
+            if outcome is not None:
+                break
+        self.decision_step += 1
+        if outcome is not None:
+            self._record_sample()
+        return report.finish(outcome, self._counts.controller_failures)
+
+    def simulate(
+        self,
+        actions: Sequence[Action] | NDArray[np.floating[Any]] | Policy,
+        keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
+    ) -> EpisodeResult:
+        """Play one episode from the scenario's start.
+
+        Args:
+            actions: The human's normalised actions, one per decision (the episode ends when
+                they run out, with outcome None, if it has not ended before), or a policy that
+                chooses each one from the simulation's state.
+            keep_trajectory: Whether to return the trajectory, or a rule on the summary.
+
+        Returns:
+            The episode's result.
+        """
+        self.reset()
+        if callable(actions):
+            while self.outcome is None:
+                self.decide(actions(self))
+        else:
+            for action in actions:
+                if self.decide(action).outcome is not None:
+                    break
+        return self.result(keep_trajectory)
+
+    def result(
+        self, keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True
+    ) -> EpisodeResult:
+        """The episode so far as a result (its trajectory when ``keep_trajectory`` says so)."""
+        summary = self.summary()
+        keep = keep_trajectory(summary) if callable(keep_trajectory) else keep_trajectory
+        return EpisodeResult(
+            summary=summary,
+            timing=self.timing(),
+            actions=self.actions,
+            risks=np.asarray(self._risks, dtype=np.float64),
+            trajectory=tuple(self.trajectory()) if keep else None,
+        )
+
+    def decode_action(self, action: Action) -> tuple[float, float]:
+        """The human's (speed in m/s, turn rate in rad/s) for a normalised action (clipped)."""
+        clipped = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
+        speed = 0.5 * (float(clipped[0]) + 1.0) * self.human_params.max_speed
+        return speed, float(clipped[1]) * self.human_params.max_turn_rate
+
+    # ------------------------------------------------------------------ physics
+    def _physics(self, speed: float, turn_rate: float, report: _DecisionTally) -> Outcome | None:
+        """One physics step, tallied into ``report``; the outcome if it ends the episode."""
+        dt = self.physics_step
+        now = self._steps * dt
+        if self._steps % self._control_every == 0:
+            self._control(now)
+        self._safety(now)
+        self.robot = step_robot(
+            self.robot,
+            self._command.speed,
+            self._command.yaw_rate,
+            dt,
+            self.robot_params,
+            emergency_stop=self.emergency_stop,
+        )
+        human = step_human(
+            self.human_position,
+            self.human_heading,
+            speed,
+            turn_rate,
+            dt,
+            self.scenario.floor,
+            self.human_params.radius,
+        )
+        self.human_position, self.human_heading = human.position, human.heading
+        self.human_velocity = human.velocity
+        self._steps += 1
+        return self._judge(report)
+
+    def _safety(self, now: float) -> None:
+        """The safety layer's verdict on the current state."""
+        status = self.safety_layer.update(
+            now, self.robot, self.human_position, self.human_params.radius
+        )
+        if status.emergency_stop and not self.emergency_stop:
+            self._counts.emergency_stops += 1
+        if self.emergency_stop and not status.emergency_stop:
+            # The controller resumes from standstill at its next period.
+            self._command = ControlCommand(speed=0.0, yaw_rate=0.0, status=self._command.status)
+        self.emergency_stop = status.emergency_stop
+        self.human_in_field = status.human_in_field
+        self._counts.field_steps += int(status.human_in_field)
+
+    def _judge(self, report: _DecisionTally) -> Outcome | None:
+        """Contact, clearance, risk and termination after a physics step."""
+        robot = self.robot
+        # The clearance of _current_clearance, from the human's place in the robot's frame,
+        # which also names the face of a contact.
+        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
+        length, width = self.robot_params.length, self.robot_params.width
+        self.clearance = point_rectangle_clearance(forward, left, length, width)
+        self.clearance -= self.human_params.radius
+        contact = self.clearance <= 0.0
+        face = rectangle_face(forward, left, length, width) if contact else ""
+        verdict = judge_contact(
+            contact, face, robot.speed, robot.heading, self.human_velocity, self.safety_spec
+        )
+        velocity_x, velocity_y = self.human_velocity.tolist()
+        step_risk = risk(
+            verdict is ContactVerdict.UNSAFE,
+            contact,
+            float(np.hypot(velocity_x, velocity_y)),
+            robot.speed,
+            self.clearance,
+            self.risk_params,
+        )
+        self._risks.append(step_risk)
+        self._stop_steps = self._stop_steps + 1 if self.emergency_stop else 0
+        goal_x, goal_y = self.route.points[-1].tolist()
+        self.outcome = episode_outcome(
+            verdict,
+            goal_reached=math.hypot(robot.x - goal_x, robot.y - goal_y)
+            <= self.robot_params.goal_tolerance,
+            sim_time=self._steps * self.physics_step,
+            emergency_stop_duration=self._stop_steps * self.physics_step,
+            sut_error=self._sut_error,
+            params=self.termination,
+        )
+        if self.outcome is None and self._steps >= self._max_steps:
+            self.outcome = Outcome.TIMEOUT
+        report.add(step_risk, contact, verdict)
+        self._counts.add(step_risk, self.clearance, face if contact else None, verdict)
+        return self.outcome
+
+    def _control(self, now: float) -> None:
+        """One tracking and control instant."""
+        tracked = self.tracker.observe(now, self.human_position, self.human_heading)
+        self.human_visible = tracked is not None
+        if not self.emergency_stop:
+            self._command = self._checked_command(now, tracked)
+        self._record_sample()
+
+    def _checked_command(self, now: float, tracked: Any) -> ControlCommand:
+        """The controller's command, or a brake when it fails, raises or is not finite."""
+        counts = self._counts
+        counts.controller_calls += 1
+        try:
+            command = self.controller.control(now, self.robot, tracked)
+        except Exception as error:
+            command = ControlCommand(
+                speed=0.0, yaw_rate=0.0, failed=True, status=f"raised {type(error).__name__}"
+            )
+            counts.controller_errors.append(f"{type(error).__name__}: {error}")
+            self._sut_error = True
+        if not (math.isfinite(command.speed) and math.isfinite(command.yaw_rate)):
+            command = ControlCommand(
+                speed=0.0, yaw_rate=0.0, failed=True, status="non-finite command"
+            )
+        counts.solve_times.append(command.solve_time_s)
+        if not command.failed:
+            self._failed_in_a_row = 0
+            return command
+        self._failed_in_a_row += 1
+        counts.controller_failures += 1
+        if self._failed_in_a_row >= self.max_failed_commands:
+            self._sut_error = True
+        # A failed command brakes the robot at its normal deceleration.
+        return ControlCommand(
+            speed=0.0,
+            yaw_rate=0.0,
+            status=command.status,
+            failed=True,
+            solve_time_s=command.solve_time_s,
+            predicted_human=command.predicted_human,
+        )
+
+    # ------------------------------------------------------------------ state and records
+    def _current_clearance(self) -> float:
+        robot = self.robot
+        return disc_rectangle_clearance(
+            self.human_position,
+            self.human_params.radius,
+            robot.x,
+            robot.y,
+            robot.heading,
+            self.robot_params.length,
+            self.robot_params.width,
+        )
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated time since reset, in s."""
+        return self._steps * self.physics_step
+
+    @property
+    def controller_status(self) -> str:
+        """Status of the controller's last command."""
+        return self._command.status
+
+    @property
+    def elapsed_fraction(self) -> float:
+        """Simulated time as a fraction of the episode's duration."""
+        return self._steps / self._max_steps
+
+    @property
+    def human_pose(self) -> tuple[float, float, float]:
+        """The human's current position (m) and heading (rad)."""
+        return float(self.human_position[0]), float(self.human_position[1]), self.human_heading
+
+    @property
+    def actions(self) -> NDArray[np.float32]:
+        """The actions of the current episode, shape (decisions, 2): enough to replay it."""
+        return np.array(self._actions, dtype=np.float32).reshape(-1, 2)
+
+    def summary(self) -> EpisodeSummary:
+        """What the episode so far amounts to (SPEC 7)."""
+        counts = self._counts
+        return EpisodeSummary(
+            outcome=None if self.outcome is None else self.outcome.value,
+            contact_face=counts.contact_face,
+            contact_verdict=counts.contact_verdict.value,
+            decision_steps=self.decision_step,
+            sim_time=self.sim_time,
+            risk_sum=counts.risk_sum,
+            max_risk=counts.max_risk,
+            min_clearance=counts.min_clearance,
+            emergency_stops=counts.emergency_stops,
+            time_in_field=counts.field_steps * self.physics_step,
+            controller_calls=counts.controller_calls,
+            controller_failures=counts.controller_failures,
+            controller_errors=tuple(counts.controller_errors),
+        )
+
+    def timing(self) -> EpisodeTiming:
+        """Wall-clock time of the episode so far and of the controller's solves."""
+        return EpisodeTiming.of(time.perf_counter() - self._started_at, self._counts.solve_times)
+
+    def _record_sample(self) -> None:
+        robot, command = self.robot, self._command
+        self._samples.append(
+            (
+                self.sim_time,
+                float(self.human_position[0]),
+                float(self.human_position[1]),
+                self.human_heading,
+                robot.x,
+                robot.y,
+                robot.heading,
+                robot.speed,
+                robot.yaw_rate,
+                self.human_visible,
+                self.emergency_stop,
+                self.human_in_field,
+                self.clearance,
+                command.status,
+                command.failed,
+                command.solve_time_s,
+                command.predicted_human,
+                command.planned_positions,
+            )
+        )
+
+    def trajectory(self) -> list[TrajectorySample]:
+        """The episode sampled at every control instant and at its end."""
+        return [TrajectorySample(*values) for values in self._samples]
+
+
+@dataclass
+class _EpisodeCounts:
+    """What the episode has tallied so far."""
+
+    min_clearance: float
+    risk_sum: float = 0.0
+    max_risk: float = 0.0
+    contact_face: str | None = None
+    contact_verdict: ContactVerdict = ContactVerdict.NONE
+    emergency_stops: int = 0
+    field_steps: int = 0
+    controller_calls: int = 0
+    controller_failures: int = 0
+    controller_errors: list[str] = field(default_factory=list)
+    solve_times: list[float] = field(default_factory=list)
+
+    def add(
+        self, step_risk: float, clearance: float, face: str | None, verdict: ContactVerdict
+    ) -> None:
+        self.risk_sum += step_risk
+        self.max_risk = max(self.max_risk, step_risk)
+        self.min_clearance = min(self.min_clearance, clearance)
+        if face is not None:
+            self.contact_face, self.contact_verdict = face, verdict
+
+
+class _DecisionTally:
+    """Accumulates a :class:`DecisionReport` over a decision's physics steps."""
+
+    def __init__(self, controller_failures_before: int) -> None:
+        self.controller_failures_before = controller_failures_before
+        self.risk = 0.0
+        self.risk_sum = 0.0
+        self.contact = False
+        self.unsafe = False
+        self.verdict = ContactVerdict.NONE
+
+    def add(self, step_risk: float, contact: bool, verdict: ContactVerdict) -> None:
+        self.risk = max(self.risk, step_risk)
+        self.risk_sum += step_risk
+        self.contact = self.contact or contact
+        self.unsafe = self.unsafe or verdict is ContactVerdict.UNSAFE
+        if verdict is not ContactVerdict.NONE:
+            self.verdict = verdict
+
+    def finish(self, outcome: Outcome | None, controller_failures: int) -> DecisionReport:
+        return DecisionReport(
+            risk=self.risk,
+            risk_sum=self.risk_sum,
+            contact=self.contact,
+            unsafe=self.unsafe,
+            contact_verdict=self.verdict.value,
+            controller_failures=controller_failures - self.controller_failures_before,
+            outcome=None if outcome is None else outcome.value,
+        )
+
+
+def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int:
+    count = round(value / unit)
+    if count < 1 or abs(count * unit - value) > 1e-9:
+        raise ValueError(
+            f"{name} ({value:g} s) must be a positive multiple of the {unit_name} ({unit:g} s)"
+        )
+    return count
