@@ -10,7 +10,6 @@ import pandas as pd
 import pytest
 
 from hazardhunt.campaign.cases import CaseError, regress_case
-from hazardhunt.campaign.toml_writer import dumps
 from tests.helpers import hazardhunt
 
 if sys.version_info >= (3, 11):
@@ -111,20 +110,17 @@ def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
     assert f"{count} failed" in done.stdout
 
 
-def test_case_files_read_back_exactly():
-    data = {
-        "sum": 0.1 + 0.2,
-        "text": 'quote " newline \n backslash \\ ünïcode',
-        "infinite": float("inf"),
-        "flag": True,
-        "empty": {},
-        "pose": {"x": 1.0, "y": 2.5},
-        "actions": [[float(np.float32(v)), -0.5] for v in np.linspace(-1, 1, 9)],
-        "nested": {"list": [1, 2], "deeper": {"key": "value"}},
-        "obstacles": [{"name": "a", "polygon": [[0, 0], [1, 0], [1, 1]]}, {"name": "b"}],
-        "key with space": 3,
-    }
-    assert tomllib.loads(dumps(data, "# a comment")) == data
+def test_case_files_hold_the_recorded_actions_and_times_bit_for_bit(run, cases):
+    failures = pd.read_parquet(run / "failures.parquet").set_index("failure_id")
+    for file in sorted(cases.glob("*.toml")):
+        case = tomllib.loads(file.read_text())
+        recorded = failures.loc[case["found"]["failure_id"]]
+        actions = np.asarray(case["human"]["actions"], dtype=np.float64)
+        as_recorded = np.asarray(list(recorded["actions"]), dtype=np.float32).reshape(-1, 2)
+        # float32 actions written as Python floats read back as the same float32 values
+        assert actions.astype(np.float32).tobytes() == as_recorded.tobytes()
+        assert np.array_equal(actions, as_recorded.astype(np.float64))
+        assert case["expected"]["sim_time"] == recorded["sim_time"]
 
 
 def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):

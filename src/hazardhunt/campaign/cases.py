@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import tomli_w
 from pydantic import ValidationError
 
 import hazardhunt
@@ -29,7 +30,6 @@ from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import EnvOptions, PluginSpec
 from hazardhunt.campaign.replay import load_run_config, play
 from hazardhunt.campaign.run import build_env
-from hazardhunt.campaign.toml_writer import dumps
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.world.scenario import (
@@ -104,7 +104,7 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
             f"# A failure hazardhunt found, as a regression case: {case['expected']['class']}\n"
             f"# Re-run it with: hazardhunt regress {path.name}\n"
         )
-        path.write_text(dumps(case, header), encoding="utf-8")
+        path.write_text(header + tomli_w.dumps(case), encoding="utf-8")
         written.append(path)
     return written
 
