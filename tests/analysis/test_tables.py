@@ -5,6 +5,7 @@ import math
 
 import pandas as pd
 import pytest
+from scipy.stats import beta
 
 from hazardhunt.analysis import tables
 from hazardhunt.analysis.results import Results
@@ -110,6 +111,21 @@ def test_runtime_speedup_is_the_studys_and_scales_to_20000_episodes():
 )
 def test_clopper_pearson_matches_the_exact_interval(k, n, low, high):
     assert tables.clopper_pearson(k, n) == pytest.approx((low, high), abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("k", "n", "confidence"),
+    [(1, 20, 0.95), (3, 100, 0.90), (7, 7, 0.99), (0, 1, 0.95), (412, 20000, 0.95)],
+)
+def test_clopper_pearson_is_the_beta_quantile_interval(k, n, confidence):
+    tail = (1 - confidence) / 2
+    low = 0.0 if k == 0 else beta.ppf(tail, k, n - k + 1)
+    high = 1.0 if k == n else beta.ppf(1 - tail, k + 1, n - k)
+    assert tables.clopper_pearson(k, n, confidence) == pytest.approx((low, high), abs=1e-9)
+
+
+def test_clopper_pearson_without_trials_is_the_whole_range():
+    assert tables.clopper_pearson(0, 0) == (0.0, 1.0)
 
 
 def test_failure_rates_pool_the_seeds():

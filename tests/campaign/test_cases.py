@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import tomli_w
 
 from hazardhunt.campaign.cases import CaseError, regress_case
-from hazardhunt.campaign.toml_writer import dumps
 from tests.helpers import hazardhunt
 
 if sys.version_info >= (3, 11):
@@ -96,6 +96,82 @@ def test_a_broken_case_file_names_the_file_and_key(cases, tmp_path):
     assert "broken.toml: environment.decision_period: missing" in done.stderr
 
 
+def drop(table, key):
+    del table[key]
+
+
+@pytest.mark.parametrize(
+    ("break_case", "message"),
+    [
+        pytest.param(lambda case: drop(case, "human"), "human: missing", id="missing-table"),
+        pytest.param(
+            lambda case: case.__setitem__("human", [[0.5, 0.0]]),
+            "human: must be a table",
+            id="not-a-table",
+        ),
+        pytest.param(
+            lambda case: case["human"]["actions"].__setitem__(1, [0.5, 0.0, 1.0]),
+            "human.actions.1: Tuple should have at most 2 items",
+            id="three-numbers-in-an-action",
+        ),
+        pytest.param(
+            lambda case: case["human"]["actions"][0].__setitem__(1, "left"),
+            "human.actions.0.1: Input should be a valid number",
+            id="text-in-an-action",
+        ),
+        pytest.param(
+            lambda case: case["human"].__setitem__("actions", []),
+            "human.actions: List should have at least 1 item",
+            id="no-actions",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("seed", "zero"),
+            "environment.seed: Input should be a valid integer",
+            id="bad-seed",
+        ),
+        pytest.param(
+            lambda case: case["expected"].__setitem__("class", ["side-left/no-stop"]),
+            "expected.class: Input should be a valid string",
+            id="class-not-text",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("decision_period", -2.0),
+            "environment.decision_period: Input should be greater than 0",
+            id="negative-decision-period",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("episode_lenght", 30.0),
+            "environment.episode_lenght: Extra inputs are not permitted",
+            id="unknown-key",
+        ),
+        pytest.param(
+            lambda case: drop(case["sut"]["controller"], "path"),
+            "sut.controller.path: missing",
+            id="plugin-without-path",
+        ),
+        pytest.param(
+            lambda case: case.__setitem__("format", 2),
+            "format: expected 1, found 2",
+            id="other-format",
+        ),
+        pytest.param(
+            lambda case: drop(case["scenario"]["robot"], "goal"),
+            "[scenario]: robot.goal: Field required",
+            id="scenario-without-goal",
+        ),
+    ],
+)
+def test_a_malformed_case_file_names_the_file_and_key(cases, tmp_path, break_case, message):
+    case = tomllib.loads(next(cases.glob("*.toml")).read_text())
+    break_case(case)
+    broken = tmp_path / "broken.toml"
+    broken.write_text(tomli_w.dumps(case))
+    with pytest.raises(CaseError) as error:
+        regress_case(broken)
+    assert str(error.value).startswith(str(broken))
+    assert message in str(error.value)
+
+
 def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
     out = tmp_path / "cases"
     assert hazardhunt("export", run, "--out", out, "--pytest").returncode == 0
@@ -111,20 +187,17 @@ def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
     assert f"{count} failed" in done.stdout
 
 
-def test_case_files_read_back_exactly():
-    data = {
-        "sum": 0.1 + 0.2,
-        "text": 'quote " newline \n backslash \\ ünïcode',
-        "infinite": float("inf"),
-        "flag": True,
-        "empty": {},
-        "pose": {"x": 1.0, "y": 2.5},
-        "actions": [[float(np.float32(v)), -0.5] for v in np.linspace(-1, 1, 9)],
-        "nested": {"list": [1, 2], "deeper": {"key": "value"}},
-        "obstacles": [{"name": "a", "polygon": [[0, 0], [1, 0], [1, 1]]}, {"name": "b"}],
-        "key with space": 3,
-    }
-    assert tomllib.loads(dumps(data, "# a comment")) == data
+def test_case_files_hold_the_recorded_actions_and_times_bit_for_bit(run, cases):
+    failures = pd.read_parquet(run / "failures.parquet").set_index("episode")
+    for file in sorted(cases.glob("*.toml")):
+        case = tomllib.loads(file.read_text())
+        recorded = failures.loc[case["found"]["episode"]]
+        actions = np.asarray(case["human"]["actions"], dtype=np.float64)
+        as_recorded = np.asarray(list(recorded["actions"]), dtype=np.float32).reshape(-1, 2)
+        # float32 actions written as Python floats read back as the same float32 values
+        assert actions.astype(np.float32).tobytes() == as_recorded.tobytes()
+        assert np.array_equal(actions, as_recorded.astype(np.float64))
+        assert case["expected"]["sim_time"] == recorded["sim_time"]
 
 
 def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):

@@ -88,6 +88,49 @@ def test_a_bad_map_names_the_map_file_and_the_obstacle(tmp_path):
         load_scenario(path)
 
 
+def map_file(tmp_path, table, polygon):
+    write(
+        tmp_path,
+        f'name = "m"\nwidth = 20.0\nheight = 20.0\n[[{table}]]\nname = "x"\npolygon = {polygon}\n',
+        "map.toml",
+    )
+    return write(tmp_path, VALID.replace(SHOPFLOOR, "map.toml"))
+
+
+@pytest.mark.parametrize(
+    ("table", "polygon", "expected"),
+    [
+        (
+            "obstacles",
+            "[[0, 0], [2, 2], [2, 0], [0, 1]]",
+            "obstacles.0.polygon: polygon edges cross or touch each other near "
+            "(0.666667, 0.666667)",
+        ),
+        (
+            "blind_zones",
+            "[[0, 0], [4, 0], [4, 4], [2, 0], [0, 4]]",  # touches its own bottom edge
+            "blind_zones.0.polygon: polygon edges cross or touch each other near (2, 0)",
+        ),
+        ("obstacles", "[[0, 0], [1, 1], [2, 2]]", "obstacles.0.polygon: polygon has no area"),
+        ("blind_zones", "[[0, 0], [1, 0], [1, 0]]", "blind_zones.0.polygon: polygon has no area"),
+        ("obstacles", "[[0, 0], [1, 0], [1, nan]]", "obstacles.0.polygon: vertices must be finite"),
+    ],
+)
+def test_a_polygon_that_is_not_a_simple_area_names_the_field(tmp_path, table, polygon, expected):
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(map_file(tmp_path, table, polygon))
+    assert f"map.toml: {expected}" in str(caught.value)
+
+
+def test_polygons_are_stored_counter_clockwise_in_the_order_given(tmp_path):
+    clockwise = [[1.0, 1.0], [1.0, 2.0], [2.0, 2.0], [2.0, 1.0]]
+    floor = load_scenario(map_file(tmp_path, "obstacles", clockwise)).floor
+    assert floor.obstacles[0].polygon.tolist() == clockwise[::-1]
+    counter_clockwise = clockwise[::-1]
+    floor = load_scenario(map_file(tmp_path, "blind_zones", counter_clockwise)).floor
+    assert floor.blind_zones[0].tolist() == counter_clockwise
+
+
 def test_a_scenario_keeps_its_field_tables_for_the_safety_layer(tmp_path):
     text = VALID + "[fields.sides]\ndiameter = 1.25\nside_margin = 0.4\n"
     scenario = load_scenario(write(tmp_path, text))

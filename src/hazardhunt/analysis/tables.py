@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.stats import beta
+from scipy.stats import binomtest
 
 from hazardhunt.analysis.results import Results
 from hazardhunt.analysis.study import (
@@ -211,17 +211,13 @@ def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
 
 
 def clopper_pearson(failures: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
-    """The exact (Clopper-Pearson) confidence interval of a failure rate."""
+    """The exact (Clopper-Pearson) confidence interval of a failure rate; (0, 1) without trials."""
     if trials <= 0:
         return 0.0, 1.0
-    alpha = 1.0 - confidence
-    low = 0.0 if failures == 0 else float(beta.ppf(alpha / 2, failures, trials - failures + 1))
-    high = (
-        1.0
-        if failures == trials
-        else float(beta.ppf(1 - alpha / 2, failures + 1, trials - failures))
+    interval = binomtest(failures, trials).proportion_ci(
+        confidence_level=confidence, method="exact"
     )
-    return low, high
+    return float(interval.low), float(interval.high)
 
 
 def failure_rates(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:

@@ -17,11 +17,12 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import pandas as pd
-from pydantic import ValidationError
+import tomli_w
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
 
 import hazardhunt
 from hazardhunt.analysis.results import load_results
@@ -29,7 +30,6 @@ from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import EnvOptions, PluginSpec
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
-from hazardhunt.campaign.toml_writer import dumps
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.world.scenario import (
@@ -44,8 +44,6 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-_ENV_OPTIONS = ("decision_period", "solver", "episode_duration", "stall_duration", "robot")
-"""The keys of a case's ``environment`` that are the run's environment options."""
 CASE_FORMAT = 1
 """Version of the case file layout."""
 VERDICTS = ("still fails", "changed", "fixed")
@@ -53,6 +51,72 @@ VERDICTS = ("still fails", "changed", "fixed")
 
 class CaseError(ValueError):
     """A case file that cannot be used; the message names the file and the key."""
+
+
+class _CaseTable(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _CaseEnvironment(EnvOptions):
+    """The episode's field setting and seed, beside the run's environment options."""
+
+    field: str
+    seed: int = 0
+    # Required in a case, which replays with the options it was found with rather than with
+    # today's defaults; EnvOptions checks their values when the options are built.
+    decision_period: float
+    episode_duration: float
+    stall_duration: float
+
+    def options(self) -> EnvOptions:
+        """The run's environment options.
+
+        Raises:
+            ValidationError: An option's value is out of range.
+        """
+        return EnvOptions.model_validate(self.model_dump(exclude={"field", "seed"}))
+
+
+class _CaseExpected(_CaseTable):
+    failure_class: str = Field(alias="class")
+    outcome: str = "failure"
+    sim_time: float | None = None
+    """When the failure happened, in s."""
+    contact_face: str = ""
+
+
+class _CasePlugin(_CaseTable):
+    path: str
+    """``package.module:Class``"""
+    params: dict[str, Any] = {}
+
+
+class _CaseSut(_CaseTable):
+    controller: _CasePlugin | None = None
+    safety_layer: _CasePlugin | None = None
+
+
+_Number = Annotated[float, Strict()]
+"""An int or a float, not a string or a boolean."""
+
+
+class _CaseHuman(_CaseTable):
+    actions: list[tuple[_Number, _Number]] = Field(min_length=1)
+    """The human's actions, one [speed, turn] pair per decision, as the env takes them."""
+
+
+class _Case(_CaseTable):
+    format: int
+    name: str = ""
+    description: str = ""
+    environment: _CaseEnvironment
+    expected: _CaseExpected
+    found: dict[str, Any] = {}
+    """Where the failure was found, for people; regress does not read it."""
+    sut: _CaseSut = _CaseSut()
+    human: _CaseHuman
+    scenario: dict[str, Any]
+    """A scenario file's contents with its map inlined (checked by ``scenario_from_data``)."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +168,7 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
             f"# A failure hazardhunt found, as a regression case: {case['expected']['class']}\n"
             f"# Re-run it with: hazardhunt regress {path.name}\n"
         )
-        path.write_text(dumps(case, header), encoding="utf-8")
+        path.write_text(header + tomli_w.dumps(case), encoding="utf-8")
         written.append(path)
     return written
 
@@ -204,23 +268,19 @@ def regress_case(
         PluginError: A plug-in does not load.
     """
     case = _read_case(path)
-    environment = case["environment"]
     try:
-        scenario = scenario_from_data(case["scenario"], f"{path} [scenario]")
+        scenario = scenario_from_data(case.scenario, f"{path} [scenario]")
     except ScenarioError as error:
         raise CaseError(str(error)) from None
-    sut = case.get("sut", {})
-    controller = controller or _spec(path, sut, "controller")
-    safety_layer = safety_layer or _spec(path, sut, "safety_layer")
+    controller = controller or _plugin(path, case.sut.controller)
+    safety_layer = safety_layer or _plugin(path, case.sut.safety_layer)
     try:
-        options = EnvOptions.model_validate(
-            {key: environment[key] for key in _ENV_OPTIONS if key in environment}
-        )
+        options = case.environment.options()
     except ValidationError as error:
         raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
     try:
         simulation = build_simulation(
-            scenario, field or environment["field"], options, controller, safety_layer
+            scenario, field or case.environment.field, options, controller, safety_layer
         )
     except ScenarioError as error:
         raise CaseError(f"{path}: environment: {error}") from None
@@ -228,7 +288,7 @@ def regress_case(
         if isinstance(error, PluginError):
             raise
         raise CaseError(f"{path}: environment: {error}") from None
-    actions = np.asarray(case["human"]["actions"], dtype=np.float32).reshape(-1, 2)
+    actions = np.asarray(case.human.actions, dtype=np.float32).reshape(-1, 2)
     result = simulation.simulate(actions)
     outcome = result.outcome or "unfinished"
     failure_class = None
@@ -236,7 +296,7 @@ def regress_case(
         failure_class = MechanismClassifier(robot=simulation.robot_params).classify(
             result.trajectory or (), result.summary, simulation.field
         )
-    expected = case["expected"]["class"]
+    expected = case.expected.failure_class
     if failure_class == expected:
         verdict = "still fails"
     elif failure_class is not None or outcome == "sut_error":
@@ -248,56 +308,48 @@ def regress_case(
     )
 
 
-def _read_case(path: Path) -> dict[str, Any]:
+def _read_case(path: Path) -> _Case:
     try:
-        case = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
         raise CaseError(f"{path}: not valid TOML: {error}") from None
     except OSError as error:
         raise CaseError(f"{path}: cannot be read: {error.strerror}") from None
-    if case.get("format") != CASE_FORMAT:
+    # Checked first: a file of another layout would otherwise fail on whatever differs.
+    if data.get("format") != CASE_FORMAT:
         raise CaseError(
-            f"{path}: format: expected {CASE_FORMAT}, found {case.get('format')!r} "
+            f"{path}: format: expected {CASE_FORMAT}, found {data.get('format')!r} "
             "(not a hazardhunt case, or one from another version)"
         )
-    required = {
-        "environment": ("field", "decision_period", "episode_duration", "stall_duration"),
-        "expected": ("class",),
-        "human": ("actions",),
-    }
-    for table, keys in required.items():
-        if not isinstance(case.get(table), dict):
-            raise CaseError(f"{path}: {table}: missing table")
-        for key in keys:
-            if key not in case[table]:
-                raise CaseError(f"{path}: {table}.{key}: missing")
-    if not isinstance(case.get("scenario"), dict):
-        raise CaseError(f"{path}: scenario: missing table")
-    actions = case["human"]["actions"]
-    if not (
-        isinstance(actions, list)
-        and actions
-        and all(
-            isinstance(a, list)
-            and len(a) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in a)
-            for a in actions
-        )
-    ):
-        raise CaseError(f"{path}: human.actions: must be a non-empty list of [speed, turn] pairs")
-    case["environment"].setdefault("seed", 0)
-    return case
+    try:
+        return _Case.model_validate(data)
+    except ValidationError as error:
+        raise CaseError(f"{path}: {_problem(error)}") from None
 
 
-def _spec(path: Path, sut: dict[str, Any], key: str) -> PluginSpec | None:
+_IN_TOML_WORDS = {
+    "missing": "missing",
+    "model_type": "must be a table",
+    "dict_type": "must be a table",
+}
+"""pydantic's messages that read better in a TOML file's words, by error type."""
+
+
+def _problem(error: ValidationError) -> str:
+    """The first problem as ``key: message`` (``format_validation_error``), in TOML's words."""
+    first = error.errors()[0]
+    problem = format_validation_error(error)
+    if first["type"] in _IN_TOML_WORDS:
+        problem = problem.replace(f": {first['msg']}", f": {_IN_TOML_WORDS[first['type']]}", 1)
+    return problem
+
+
+def _plugin(path: Path, entry: _CasePlugin | None) -> PluginSpec | None:
     """The case's own plug-in, importable from the case's folder or the working directory."""
-    entry = sut.get(key)
     if entry is None:
         return None
-    if not isinstance(entry, dict) or "path" not in entry:
-        raise CaseError(f"{path}: sut.{key}: needs a path = 'package.module:Class'")
     return PluginSpec(
-        path=entry["path"],
-        params=entry.get("params", {}),
+        path=entry.path,
+        params=entry.params,
         search_path=[str(path.parent.resolve()), str(Path.cwd())],
     )

@@ -126,33 +126,3 @@ def point_in_polygon(point: FloatArray, polygon: FloatArray) -> bool:
     with np.errstate(divide="ignore", invalid="ignore"):
         crossing_x = xs + (py - ys) * (xs_next - xs) / (ys_next - ys)
     return bool(np.count_nonzero(straddles & (px < crossing_x)) % 2)
-
-
-def polygon_area(polygon: FloatArray) -> float:
-    """Signed area of a polygon (positive when its vertices run counter-clockwise), in m^2."""
-    xs, ys = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.dot(xs, np.roll(ys, -1)) - np.dot(np.roll(xs, -1), ys))
-
-
-def segments_intersect(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> bool:
-    """Whether the closed segments a-b and c-d share a point."""
-
-    def orientation(p: FloatArray, q: FloatArray, r: FloatArray) -> float:
-        return float((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
-
-    def on_segment(p: FloatArray, q: FloatArray, r: FloatArray) -> bool:
-        return bool(
-            min(p[0], q[0]) <= r[0] <= max(p[0], q[0])
-            and min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
-        )
-
-    o1, o2 = orientation(a, b, c), orientation(a, b, d)
-    o3, o4 = orientation(c, d, a), orientation(c, d, b)
-    if o1 * o2 < 0 and o3 * o4 < 0:
-        return True
-    return (
-        (o1 == 0 and on_segment(a, b, c))
-        or (o2 == 0 and on_segment(a, b, d))
-        or (o3 == 0 and on_segment(c, d, a))
-        or (o4 == 0 and on_segment(c, d, b))
-    )

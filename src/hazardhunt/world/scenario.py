@@ -8,6 +8,7 @@ file, the field and what is wrong.
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
@@ -17,9 +18,11 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from shapely.geometry import Polygon
+from shapely.validation import explain_validity
 
 from hazardhunt.world.floor import FloorMap, Obstacle
-from hazardhunt.world.geometry import FloatArray, polygon_area, segments_intersect
+from hazardhunt.world.geometry import FloatArray
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -86,21 +89,21 @@ class _PoseSpec(_PointSpec):
 Vertex = tuple[float, float]
 
 
+_GEOS_PROBLEM = re.compile(r"[^\[]+\[(?P<x>\S+) (?P<y>\S+)\]")
+"""GEOS's reason for an invalid polygon, such as ``Self-intersection[1 1]``."""
+
+
 def _check_polygon(polygon: list[Vertex]) -> list[Vertex]:
-    vertices = np.asarray(polygon, dtype=np.float64)
-    if not np.all(np.isfinite(vertices)):
+    if not np.all(np.isfinite(np.asarray(polygon, dtype=np.float64))):
         raise ValueError("vertices must be finite numbers")
-    if abs(polygon_area(vertices)) < 1e-9:
+    shape = Polygon(polygon)
+    if shape.area < 1e-9:
         raise ValueError("polygon has no area")
-    count = len(vertices)
-    for i in range(count):
-        for j in range(i + 2, count):
-            if i == 0 and j == count - 1:
-                continue
-            if segments_intersect(
-                vertices[i], vertices[(i + 1) % count], vertices[j], vertices[(j + 1) % count]
-            ):
-                raise ValueError(f"polygon edges {i} and {j} cross each other")
+    if not shape.is_valid:
+        reason = explain_validity(shape)
+        found = _GEOS_PROBLEM.fullmatch(reason)
+        where = f"near ({float(found['x']):g}, {float(found['y']):g})" if found else f"({reason})"
+        raise ValueError(f"polygon edges cross or touch each other {where}")
     return polygon
 
 
@@ -242,7 +245,7 @@ def _pose(spec: _PoseSpec) -> Pose:
 def _build_floor(spec: _MapSpec) -> FloorMap:
     def counter_clockwise(polygon: list[Vertex]) -> FloatArray:
         vertices = np.asarray(polygon, dtype=np.float64)
-        return vertices if polygon_area(vertices) > 0 else vertices[::-1].copy()
+        return vertices if Polygon(polygon).exterior.is_ccw else vertices[::-1].copy()
 
     return FloorMap(
         name=spec.name,
