@@ -6,6 +6,7 @@ import math
 import pytest
 
 from hazardhunt.sim.simulation import Simulation
+from hazardhunt.spec.descriptors import describe
 from hazardhunt.sut.nmpc import NMPCController
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, Pose, load_scenario
@@ -118,3 +119,12 @@ def test_a_human_loitering_in_the_field_stalls_the_episode():
     first_stop = next(r.time for r in sim.trajectory() if r.emergency_stop)
     assert result.summary.sim_time == pytest.approx(first_stop + 10.0, abs=0.25)
     assert math.isclose(result.summary.time_in_field, 10.0, abs_tol=0.3)
+
+
+@pytest.mark.parametrize("field", ["none", "1.25m"])
+def test_the_failure_descriptor_places_a_side_attack_on_the_robots_right(field):
+    result = run(make("crossing", field), side_attack)
+    bearing, robot_speed, emergency_stop = describe(result.summary)
+    assert -math.pi * 3 / 4 < bearing < -math.pi / 4  # the human came from the south
+    assert robot_speed > 0.5
+    assert emergency_stop == 0.0  # the field never saw it

@@ -247,7 +247,9 @@ class Simulation:
         self._stop_steps = 0
         self._failed_in_a_row = 0
         self._sut_error = False
-        self._counts = _EpisodeCounts(min_clearance=self.clearance)
+        robot = self.robot
+        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
+        self._counts = _EpisodeCounts(self.clearance, math.atan2(left, forward))
         self._actions: list[NDArray[np.float32]] = []
         self._risks: list[float] = []
         self._samples: list[tuple[Any, ...]] = []
@@ -405,8 +407,19 @@ class Simulation:
         if self.outcome is None and self._steps >= self._max_steps:
             self.outcome = Outcome.TIMEOUT
         report.add(step_risk, contact, verdict)
-        self._counts.add(step_risk, self.clearance, face if contact else None, verdict)
+        counts = self._counts
+        counts.add(step_risk, face if contact else None, verdict)
+        if self.clearance < counts.min_clearance or contact:
+            counts.closest(
+                self.clearance, math.atan2(left, forward), robot.speed, self._stop_state()
+            )
         return self.outcome
+
+    def _stop_state(self) -> str:
+        """The safety layer's history: ``never`` stopped, stop ``holding`` or ``released``."""
+        if self.emergency_stop:
+            return "holding"
+        return "released" if self._counts.emergency_stops else "never"
 
     def _control(self, now: float) -> None:
         """One tracking and control instant."""
@@ -500,6 +513,9 @@ class Simulation:
             risk_sum=counts.risk_sum,
             max_risk=counts.max_risk,
             min_clearance=counts.min_clearance,
+            closest_bearing=counts.closest_bearing,
+            closest_robot_speed=counts.closest_robot_speed,
+            closest_emergency_stop=counts.closest_emergency_stop,
             emergency_stops=counts.emergency_stops,
             time_in_field=counts.field_steps * self.physics_step,
             controller_calls=counts.controller_calls,
@@ -546,6 +562,9 @@ class _EpisodeCounts:
     """What the episode has tallied so far."""
 
     min_clearance: float
+    closest_bearing: float
+    closest_robot_speed: float = 0.0
+    closest_emergency_stop: str = "never"
     risk_sum: float = 0.0
     max_risk: float = 0.0
     contact_face: str | None = None
@@ -557,14 +576,17 @@ class _EpisodeCounts:
     controller_errors: list[str] = field(default_factory=list)
     solve_times: list[float] = field(default_factory=list)
 
-    def add(
-        self, step_risk: float, clearance: float, face: str | None, verdict: ContactVerdict
-    ) -> None:
+    def add(self, step_risk: float, face: str | None, verdict: ContactVerdict) -> None:
         self.risk_sum += step_risk
         self.max_risk = max(self.max_risk, step_risk)
-        self.min_clearance = min(self.min_clearance, clearance)
         if face is not None:
             self.contact_face, self.contact_verdict = face, verdict
+
+    def closest(self, clearance: float, bearing: float, robot_speed: float, stop: str) -> None:
+        """The human is as close as ever (or touches): remember where, and how things stood."""
+        self.min_clearance = min(self.min_clearance, clearance)
+        self.closest_bearing, self.closest_robot_speed = bearing, robot_speed
+        self.closest_emergency_stop = stop
 
 
 class _DecisionTally:

@@ -41,6 +41,15 @@ class EpisodeSummary:
     """The largest risk of any physics step: the return of the maximum reward."""
     min_clearance: float = float("inf")
     """The smallest gap between human and robot, in m (negative: overlap)."""
+    closest_bearing: float = 0.0
+    """Where the human was around the robot at the contact, or at the closest approach without
+    one: the bearing of the human's centre in the robot's frame, in rad (0 ahead, pi/2 on the
+    left, -pi/2 on the right)."""
+    closest_robot_speed: float = 0.0
+    """The robot's speed then, in m/s."""
+    closest_emergency_stop: str = "never"
+    """The safety layer's history then: the stop had ``never`` triggered, was ``holding``, or
+    had been ``released``."""
     emergency_stops: int = 0
     """Emergency stops the safety layer triggered."""
     time_in_field: float = 0.0
