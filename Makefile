@@ -50,6 +50,7 @@ test-all: $(STAMP) browser
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks scripts examples
 	$(BIN)/ruff format --check src tests benchmarks scripts examples
+	$(BIN)/python scripts/check_architecture.py
 
 format: $(STAMP)
 	$(BIN)/ruff format src tests benchmarks scripts examples

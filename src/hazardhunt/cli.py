@@ -292,7 +292,7 @@ def export(
     ] = False,
 ) -> None:
     """Write failures as self-contained regression cases (TOML), to re-run with regress."""
-    from hazardhunt.campaign.cases import export_cases, write_pytest_module
+    from hazardhunt.cases import export_cases, write_pytest_module
 
     written = export_cases(directory, out, every_failure=all_failures)
     console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
@@ -320,7 +320,7 @@ def regress(
 
     Exits with code 1 while any case still fails or changed, so that it can gate a CI job.
     """
-    from hazardhunt.campaign.cases import VERDICTS, case_files, regress_case
+    from hazardhunt.cases import VERDICTS, case_files, regress_case
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
@@ -379,8 +379,8 @@ def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
 def run() -> None:
     """Entry point that turns input errors into one clear line on stderr and exit code 2."""
     from hazardhunt.analysis.results import ResultsError
-    from hazardhunt.campaign.cases import CaseError
     from hazardhunt.campaign.replay import ReplayError
+    from hazardhunt.cases import CaseError
     from hazardhunt.sut.plugins import PluginError
 
     try:

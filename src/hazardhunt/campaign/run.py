@@ -39,6 +39,7 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
 from hazardhunt.spec.outcomes import TerminationParams
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, tester_reward
 from hazardhunt.world.scenario import Scenario
@@ -142,8 +143,18 @@ def record_run(
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock
+    summary = _run_summary(config, store, simulation.field, wall_time, started_at)
+    write_json_atomic(directory / "summary.json", summary)
+    return summary
+
+
+def _run_summary(
+    config: RunConfig, store: RunStore, field: FieldShape, wall_time: float, started_at: str
+) -> dict[str, Any]:
+    """What ``summary.json`` says of a finished run."""
+    classifier = store.classifier
     outcomes = [row["outcome"] for row in store.episodes]
-    summary = {
+    return {
         "run_id": config.run_id,
         "scenario": config.scenario,
         "field": config.field,
@@ -155,18 +166,16 @@ def record_run(
         "first_failure_episode": next(
             (i for i, outcome in enumerate(outcomes) if outcome == "failure"), None
         ),
-        "field_shape": asdict(simulation.field),
+        "field_shape": asdict(field),
         "classifier": classifier.name,
         "classes": store.classes,
         "classes_found": len(set(store.classes) - {OTHER}),
-        "classes_total": len(classifier.classes_for(simulation.field)) - 1,
+        "classes_total": len(classifier.classes_for(field)) - 1,
         "wall_time_s": wall_time,
         "episodes_per_s": len(outcomes) / wall_time if wall_time > 0 else 0.0,
         "started_at": started_at,
         "finished_at": datetime.now(timezone.utc).isoformat(),
     }
-    write_json_atomic(directory / "summary.json", summary)
-    return summary
 
 
 _OUTCOME_COUNTS = ("failure", "safe_contact", "stall", "timeout", "goal", "sut_error")

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from hazardhunt.campaign.cases import CaseError, regress_case
+from hazardhunt.cases import CaseError, regress_case
 from tests.helpers import hazardhunt
 
 if sys.version_info >= (3, 11):

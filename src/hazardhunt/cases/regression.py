@@ -220,7 +220,7 @@ from pathlib import Path
 
 import pytest
 
-from hazardhunt.campaign.cases import case_files, regress_case
+from hazardhunt.cases import case_files, regress_case
 
 CASES = case_files(Path(__file__).parent)
 
