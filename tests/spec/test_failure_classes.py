@@ -353,3 +353,34 @@ def test_no_human_reaches_the_front_face_while_the_robot_brakes(field):
     farthest_front_contact = math.hypot(diagonal, robot.width / 2 + diagonal)
     assert (steps, closing) == (3, pytest.approx(0.3375))
     assert field / 2 + human.radius - farthest_front_contact > closing
+
+
+# ------------------------------------------------------------------ the field's response time
+def with_response_time(seconds):
+    """The crossing with a 1.25 m field whose brake engages ``seconds`` after a violation."""
+    fields = {"slow": {"diameter": 1.25, "response_time": seconds}}
+    return Simulation.build(
+        dataclasses.replace(CROSSING, fields=fields), "slow", 0.2, controller=NMPC
+    )
+
+
+@pytest.mark.parametrize(
+    ("seconds", "trigger", "expected"),
+    [
+        (0.0, 8.0, None),  # the study's instant brake: the robot stands before the contact
+        (0.3, 8.0, "field/braking/moving"),  # a late brake: the braking front hits the human
+        (0.15, 8.05, "side-right/braking"),
+    ],
+)
+def test_a_slower_safety_function_makes_braking_classes_reachable(seconds, trigger, expected):
+    # Wait south of the route and step onto it at x = 9.15 m once the robot has passed trigger.
+    policy = lie_in_wait(
+        (9.15, 8.6), math.pi / 2, robot_past(trigger), lambda sim: walk_to(sim, (9.15, ROUTE_Y))
+    )
+    sim = with_response_time(seconds)
+    result = run(sim, policy)
+    if expected is None:
+        assert result.outcome != "failure"
+    else:
+        assert result.outcome == "failure"
+        assert CLASSIFIER.classify(result.trajectory, result.summary, sim.field) == expected
