@@ -4,6 +4,7 @@ controller that raises is a recorded sut_error."""
 
 import json
 import shutil
+import sys
 import textwrap
 from pathlib import Path
 
@@ -153,3 +154,14 @@ def test_a_run_on_your_own_scenario_is_found_again_from_any_folder(tmp_path):
     assert Path(stored) == (EXAMPLE.parent / "loading_dock" / "dock_crossing.toml").resolve()
     report = hazardhunt("report", out, cwd=tmp_path)
     assert report.returncode == 0, report.stderr
+
+
+def test_loading_a_plug_in_leaves_sys_path_as_it_was(tmp_path):
+    plugin_module(tmp_path, RAISING, "path_probe")
+    before = list(sys.path)
+    controller = build_controller("path_probe:Raising", {}, [str(tmp_path)])
+    assert controller.control_period == 0.2
+    assert sys.path == before
+    with pytest.raises(PluginError, match="cannot import module 'path_probe_missing'"):
+        build_controller("path_probe_missing:Raising", {}, [str(tmp_path)])
+    assert sys.path == before

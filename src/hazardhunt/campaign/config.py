@@ -64,10 +64,11 @@ class PluginSpec(_Strict):
 def _check_plugin(kind: str, spec: PluginSpec | None) -> PluginSpec | None:
     """Build the plug-in once, so that a bad one stops the campaign before any run starts."""
     if spec is not None:
-        from hazardhunt.sut.plugins import PluginError, build
+        from hazardhunt.sut.plugins import PluginError, build_controller, build_safety_layer
 
+        build = build_controller if kind == "controller" else build_safety_layer
         try:
-            build(kind, spec.path, spec.params, spec.search_path)
+            build(spec.path, spec.params, spec.search_path)
         except PluginError as error:
             raise ValueError(str(error)) from None
     return spec
