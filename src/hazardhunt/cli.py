@@ -228,8 +228,11 @@ def campaign(
         str | None, typer.Option(help="Address of an existing Ray cluster (with --executor ray).")
     ] = None,
 ) -> None:
-    """Run every run of a campaign file; run it again to finish an interrupted campaign."""
-    from hazardhunt.campaign.campaign import EXECUTORS, run_campaign
+    """Run every run of a campaign file; run it again to finish an interrupted campaign.
+
+    Exits with code 1 when some runs raised (after the others finished and the report).
+    """
+    from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
     from hazardhunt.campaign.config import load_campaign
 
     if executor not in EXECUTORS:
@@ -239,7 +242,12 @@ def campaign(
     if address is not None and executor != "ray":
         raise typer.BadParameter("only with --executor ray", param_hint="--address")
     config = load_campaign(file)
-    run_campaign(config, out, workers=workers, executor=executor, address=address, console=console)
+    try:
+        run_campaign(
+            config, out, workers=workers, executor=executor, address=address, console=console
+        )
+    except CampaignFailed:
+        raise typer.Exit(1) from None
 
 
 @app.command()
