@@ -25,6 +25,7 @@ from hazardhunt.campaign.config import ConfigError
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import PluginSpec
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.testers.registry import TESTERS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
 app = typer.Typer(
@@ -118,7 +119,7 @@ SafetyLayerParamOption = Annotated[
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
-    tester: Annotated[str, typer.Option(help="random, ppo-acc or ppo-max.")],
+    tester: Annotated[str, typer.Option(help=f"{', '.join(TESTERS)}.")],
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,

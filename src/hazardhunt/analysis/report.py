@@ -25,12 +25,14 @@ import pandas as pd
 import hazardhunt
 from hazardhunt.analysis import figures, tables
 from hazardhunt.analysis.results import Results, load_results
+from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
 from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
+from hazardhunt.testers.registry import sort_testers
 
 RUN_COLUMNS = (
     "run_id",
@@ -188,7 +190,8 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
     ),
     (
         "Runtime: accumulated vs maximum reward (Table II)",
-        "Mean wall time per run; the speedup of ppo-max is 1 - max / acc as in the study. "
+        f"Mean wall time per run; the speedup of {STUDY_REWARDS[1]} is 1 - max / acc as in the "
+        "study. "
         "'per 20k' scales the measured time per episode to the study's 20,000 episodes.",
         "runtime",
         lambda results, _: tables.runtime_table(results.runs),
@@ -210,7 +213,7 @@ def _reward_hacking(report: _Report, results: Results) -> None:
         "Per tester: the human's time inside the protective field and the emergency stops per "
         "episode, the share of stalls and timeouts, the return of episodes without a failure, "
         f"and the episodes flagged as loitering ({rule}). Returns compare within a reward "
-        "only: ppo-acc sums the risk over the episode, ppo-max and random take its maximum.",
+        f"only ({_rewards(results.runs)}).",
     )
     report.table(section, "reward_hacking", tables.reward_hacking(results.episodes))
     typical = tables.typical_loitering(results.loitering)
@@ -227,6 +230,23 @@ def _reward_hacking(report: _Report, results: Results) -> None:
         f"The most typical loitering episode: {typical['run_id']}, episode "
         f"{int(typical['episode'])} ({typical['outcome']}, {int(typical['estop_count'])} stops, "
         f"{typical['time_in_field']:.1f} s in the field)",
+    )
+
+
+REWARD_MEANINGS = {"acc": "the risk summed over the episode", "max": "the episode's maximum risk"}
+"""What a tester's return is, per reward."""
+
+
+def _rewards(runs: pd.DataFrame) -> str:
+    """Which tester's return is which reward, e.g. ``random, ppo-max: the episode's maximum
+    risk; ppo-acc: the risk summed over the episode``."""
+    testers: dict[str, list[str]] = {}
+    for tester in sort_testers(runs["tester"]):
+        reward = str(runs.loc[runs["tester"] == tester, "reward"].iloc[0])
+        testers.setdefault(reward, []).append(tester)
+    return "; ".join(
+        f"{', '.join(names)}: {REWARD_MEANINGS.get(reward, reward)}"
+        for reward, names in testers.items()
     )
 
 
@@ -364,7 +384,7 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
         "unfinished_runs": results.unfinished,
         "lesson_1": {
             str(row["tester"]): {
-                "more_failures_than_random": int(row["more failures than random"]),
+                "more_failures_than_random": int(row[f"more failures than {STUDY_BASELINE}"]),
                 "comparisons": int(row["comparisons"]),
             }
             for _, row in lesson.iterrows()

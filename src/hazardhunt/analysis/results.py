@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,7 @@ from hazardhunt.spec.failure_classes import (
     classify_failures,
 )
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.testers.registry import sort_testers
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
@@ -79,9 +81,11 @@ def load_results(directory: Path, classifier: FailureClassifier | None = None) -
     if not run_directories:
         raise ResultsError(f"{directory}: no run of the campaign has finished yet")
     summaries = [_read_json(path / "summary.json") for path in run_directories]
+    configs = [_read_json(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries)
     runs["directory"] = [str(path) for path in run_directories]
-    runs = runs.sort_values(list(RUN_KEYS[1:])).reset_index(drop=True)
+    runs["reward"] = [config.get("reward") for config in configs]
+    runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
     tables = {
         name: _stacked(run_directories, summaries, f"{name}.parquet")
         for name in ("episodes", "failures", "loitering")
@@ -155,6 +159,20 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ResultsError(f"{path}: expected a JSON object")
     return data
+
+
+def in_tester_order(
+    table: pd.DataFrame, keys: Sequence[str] = (), then: Sequence[str] = ()
+) -> pd.DataFrame:
+    """``table`` sorted by ``keys``, then by tester, then by ``then``: registered testers in the
+    registry's order, the others (plug-ins) after them by name."""
+    rank = {name: i for i, name in enumerate(sort_testers(table["tester"]))}
+
+    def sort_key(column: pd.Series) -> pd.Series:
+        return column.map(rank) if column.name == "tester" else column
+
+    ordered = table.sort_values([*keys, "tester", *then], key=sort_key, kind="stable")
+    return ordered.reset_index(drop=True)
 
 
 def setting_diameter(field_setting: str, scenario: str) -> float | None:

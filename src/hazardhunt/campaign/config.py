@@ -19,7 +19,7 @@ from pydantic import (
 )
 
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
-from hazardhunt.testers import TESTER_NAMES, make_tester
+from hazardhunt.testers.registry import TESTERS, make_tester
 from hazardhunt.world.scenario import format_validation_error
 
 if sys.version_info >= (3, 11):
@@ -116,8 +116,8 @@ def _check_fields(scenario: str, fields: list[str]) -> None:
 
 
 def _check_tester(value: str) -> str:
-    if value not in TESTER_NAMES:
-        raise ValueError(f"unknown tester {value!r}: use one of {', '.join(TESTER_NAMES)}")
+    if value not in TESTERS:
+        raise ValueError(f"unknown tester {value!r}: use one of {', '.join(TESTERS)}")
     return value
 
 
@@ -126,7 +126,7 @@ ScenarioName = Annotated[str, AfterValidator(_check_scenario)]
 FieldSetting = Annotated[str, Field(min_length=1)]
 """A protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
 TesterName = Annotated[str, AfterValidator(_check_tester)]
-"""A built-in tester."""
+"""A registered tester (``hazardhunt.testers.TESTERS``)."""
 
 
 class RunConfig(_Strict):
@@ -137,7 +137,7 @@ class RunConfig(_Strict):
     field: FieldSetting
     """Protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
     tester: TesterName
-    """The search method: random, ppo-acc or ppo-max."""
+    """The search method: a registered tester (``TESTERS``)."""
     seed: int = Field(ge=0)
     """Seeds every random choice of the run."""
     episodes: int = Field(gt=0)
