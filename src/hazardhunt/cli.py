@@ -21,12 +21,12 @@ from rich.progress import Progress
 from rich.table import Table
 
 from hazardhunt.campaign.config import ConfigError
-
-if TYPE_CHECKING:
-    from hazardhunt.campaign.config import PluginSpec
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.testers.registry import TESTERS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
+
+if TYPE_CHECKING:
+    from hazardhunt.campaign.plugins import PluginSpec
 
 app = typer.Typer(
     help="Find the human behaviours that make a robot's control stack unsafe.",
@@ -141,7 +141,7 @@ def run_command(
     ] = False,
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
-    from hazardhunt.campaign.config import EnvOptions, RunConfig
+    from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
     from hazardhunt.campaign.runner import run_into
 
     config = _validated(
@@ -157,6 +157,7 @@ def run_command(
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
         )
     )
+    check_plugins(config)
     summary = run_into(config, out, console=err_console)
     if json_output:
         print(json.dumps(summary))
@@ -181,7 +182,7 @@ def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
 def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSpec | None:
     """A plug-in's specification from the command line; its module may sit in the working
     directory."""
-    from hazardhunt.campaign.config import PluginSpec
+    from hazardhunt.campaign.plugins import PluginSpec
 
     if path is None:
         if params:

@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from hazardhunt.campaign.config import ConfigError, load_campaign
+from hazardhunt.campaign.config import ConfigError, RunConfig, check_plugins, load_campaign
 from hazardhunt.sut.plugins import PluginError, build_controller, build_safety_layer
 from tests.helpers import hazardhunt
 
@@ -165,3 +165,61 @@ def test_loading_a_plug_in_leaves_sys_path_as_it_was(tmp_path):
     with pytest.raises(PluginError, match="cannot import module 'path_probe_missing'"):
         build_controller("path_probe_missing:Raising", {}, [str(tmp_path)])
     assert sys.path == before
+
+
+COUNTING = """
+    from pathlib import Path
+
+    from hazardhunt.sut.protocols import ControlCommand
+
+    class Counting:
+        \"\"\"A controller that notes every construction in built.txt next to it.\"\"\"
+
+        control_period = 0.2
+
+        def __init__(self, cruise_speed=1.0):
+            with Path(__file__).with_name("built.txt").open("a") as log:
+                log.write("built\\n")
+            self.cruise_speed = cruise_speed
+
+        def reset(self, floor, route, robot):
+            pass
+
+        def control(self, time, robot, human):
+            return ControlCommand(speed=self.cruise_speed, yaw_rate=0.0)
+"""
+
+
+def constructions(folder: Path) -> int:
+    log = folder / "built.txt"
+    return log.read_text().count("built") if log.exists() else 0
+
+
+def test_validating_a_configuration_builds_no_plug_in(tmp_path):
+    plugin_module(tmp_path, COUNTING, "counting_once")
+    data = {
+        "scenario": "crossing",
+        "field": "none",
+        "tester": "random",
+        "seed": 0,
+        "episodes": 3,
+        "controller": {"path": "counting_once:Counting", "search_path": [str(tmp_path)]},
+    }
+    config = RunConfig.model_validate(data)
+    assert RunConfig.model_validate(config.model_dump()) == config
+    assert constructions(tmp_path) == 0
+    check_plugins(config)  # where a command line is read: once
+    assert constructions(tmp_path) == 1
+
+
+def test_a_campaign_file_builds_each_plug_in_once_however_many_runs(tmp_path):
+    plugin_module(tmp_path, COUNTING, "counting_campaign")
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing", "head-on"]\nfields = ["none", "2m"]\ntesters = ["random"]\n'
+        'seeds = [0, 1]\nepisodes = 3\n[controller]\npath = "counting_campaign:Counting"\n'
+    )
+    config = load_campaign(campaign)
+    assert constructions(tmp_path) == 1
+    assert len(config.runs()) == 8
+    assert constructions(tmp_path) == 1

@@ -26,7 +26,8 @@ from pydantic import ValidationError
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import EnvOptions, PluginSpec
+from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.replay import load_run_config, play
 from hazardhunt.campaign.run import build_env
 from hazardhunt.campaign.toml_writer import dumps

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import functools
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -18,6 +18,8 @@ from pydantic import (
     field_validator,
 )
 
+from hazardhunt.campaign.plugins import PluginSpec, make_controller, make_safety_layer
+from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.testers.registry import TESTERS, make_tester
 from hazardhunt.world.scenario import format_validation_error
@@ -47,41 +49,6 @@ class EnvOptions(_Strict):
     """Simulated time after which an episode times out, in s."""
     stall_duration: float = Field(default=10.0, gt=0)
     """Continuous emergency-stop time after which an episode stalls, in s."""
-
-
-class PluginSpec(_Strict):
-    """A user's controller or safety layer: an import path and its keyword parameters."""
-
-    path: str
-    """``package.module:Class`` (or a factory function)."""
-    params: dict[str, Any] = {}
-    """Keyword parameters of the class."""
-    search_path: list[str] = []
-    """Directories the module is imported from besides ``sys.path`` (hazardhunt adds the
-    campaign file's directory and the working directory)."""
-
-
-def _check_plugin(kind: str, spec: PluginSpec | None) -> PluginSpec | None:
-    """Build the plug-in once, so that a bad one stops the campaign before any run starts."""
-    if spec is not None:
-        from hazardhunt.sut.plugins import PluginError, build_controller, build_safety_layer
-
-        build = build_controller if kind == "controller" else build_safety_layer
-        try:
-            build(spec.path, spec.params, spec.search_path)
-        except PluginError as error:
-            raise ValueError(str(error)) from None
-    return spec
-
-
-ControllerSpec = Annotated[
-    PluginSpec | None, AfterValidator(functools.partial(_check_plugin, "controller"))
-]
-"""A controller plug-in, built once when the configuration is read."""
-SafetyLayerSpec = Annotated[
-    PluginSpec | None, AfterValidator(functools.partial(_check_plugin, "safety layer"))
-]
-"""A safety-layer plug-in, built once when the configuration is read."""
 
 
 def _check_scenario(value: str) -> str:
@@ -145,9 +112,9 @@ class RunConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester_params: dict[str, Any] = {}
     """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
-    controller: ControllerSpec = None
+    controller: PluginSpec | None = None
     """The robot's controller; the built-in NMPC when None."""
-    safety_layer: SafetyLayerSpec = None
+    safety_layer: PluginSpec | None = None
     """The safety layer; the laser field of ``field`` when None."""
 
     @field_validator("field")
@@ -182,9 +149,9 @@ class CampaignConfig(_Strict):
     env: EnvOptions = EnvOptions()
     tester: dict[TesterName, dict[str, Any]] = {}
     """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
-    controller: ControllerSpec = None
+    controller: PluginSpec | None = None
     """The robot's controller of every run (``[controller]``); the built-in NMPC when None."""
-    safety_layer: SafetyLayerSpec = None
+    safety_layer: PluginSpec | None = None
     """The safety layer of every run (``[safety_layer]``); the laser field when None."""
 
     @field_validator("fields")
@@ -240,7 +207,8 @@ def _check_tester_params(tester: str, params: dict[str, Any]) -> None:
 
 
 def load_campaign(path: Path) -> CampaignConfig:
-    """Read and validate a campaign file; relative scenario file paths are relative to it.
+    """Read and validate a campaign file and check its plug-ins; relative scenario file paths are
+    relative to it.
 
     Raises:
         ConfigError: Naming the file, the field and what is wrong.
@@ -265,6 +233,37 @@ def load_campaign(path: Path) -> CampaignConfig:
         if isinstance(data.get(key), dict) and "search_path" not in data[key]:
             data[key]["search_path"] = [str(path.parent.resolve()), str(Path.cwd())]
     try:
-        return CampaignConfig.model_validate(data)
+        config = CampaignConfig.model_validate(data)
     except ValidationError as error:
         raise ConfigError(f"{path}: {format_validation_error(error)}") from error
+    try:
+        check_plugins(config)
+    except ConfigError as error:
+        raise ConfigError(f"{path}: {error}") from None
+    return config
+
+
+def check_plugins(config: RunConfig | CampaignConfig) -> None:
+    """Build every plug-in ``config`` names once, so that a bad one stops a run or campaign
+    before anything runs. Validating a configuration builds nothing; this is called where a
+    command line or a campaign file is read.
+
+    Raises:
+        ConfigError: Naming the configuration's key and the problem.
+    """
+    for key, spec, build in _plugins(config):
+        try:
+            build(spec)
+        except PluginError as error:
+            raise ConfigError(f"{key}: {error}") from None
+
+
+def _plugins(
+    config: RunConfig | CampaignConfig,
+) -> list[tuple[str, PluginSpec, Callable[[PluginSpec], object]]]:
+    """Every plug-in of ``config``: its key, its specification and what builds it."""
+    named: list[tuple[str, PluginSpec | None, Callable[[PluginSpec], object]]] = [
+        ("controller", config.controller, make_controller),
+        ("safety_layer", config.safety_layer, make_safety_layer),
+    ]
+    return [(key, spec, build) for key, spec, build in named if spec is not None]

@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import hazardhunt
-from hazardhunt.campaign.config import EnvOptions, PluginSpec, RunConfig
+from hazardhunt.campaign.config import EnvOptions, RunConfig
+from hazardhunt.campaign.plugins import PluginSpec, make_controller, make_safety_layer
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
@@ -55,20 +56,14 @@ def build_env(
     Raises:
         PluginError: A plug-in does not load.
     """
-    from hazardhunt.sut.plugins import build_controller, build_safety_layer
-
     return AGVEnv(
         scenario,
         field,
         reward=reward,
         decision_period=options.decision_period,
         solver=options.solver,
-        controller=None
-        if controller is None
-        else build_controller(controller.path, controller.params, controller.search_path),
-        safety_layer=None
-        if safety_layer is None
-        else build_safety_layer(safety_layer.path, safety_layer.params, safety_layer.search_path),
+        controller=None if controller is None else make_controller(controller),
+        safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
         termination=TerminationParams(options.episode_duration, options.stall_duration),
     )
 

@@ -1,0 +1,40 @@
+"""A user's plug-in as configuration names it (an import path and keyword parameters), and how
+each kind is built from it: controller and safety layer.
+
+Configuration only names plug-ins; nothing is imported while it is validated. They are built
+where they are used (a run builds its own) and checked once where a campaign file or a command
+line is read (:func:`hazardhunt.campaign.config.check_plugins`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict
+
+from hazardhunt.sut.plugins import build_controller, build_safety_layer
+from hazardhunt.sut.protocols import Controller, SafetyLayer
+
+
+class PluginSpec(BaseModel):
+    """A user's plug-in: an import path and its keyword parameters."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    path: str
+    """``package.module:Class`` (or a factory function)."""
+    params: dict[str, Any] = {}
+    """Keyword parameters of the class."""
+    search_path: list[str] = []
+    """Directories the module is imported from besides ``sys.path`` (hazardhunt adds the
+    campaign file's directory and the working directory)."""
+
+
+def make_controller(spec: PluginSpec) -> Controller:
+    """The controller ``spec`` names (see :func:`hazardhunt.sut.plugins.build_controller`)."""
+    return build_controller(spec.path, spec.params, spec.search_path)
+
+
+def make_safety_layer(spec: PluginSpec) -> SafetyLayer:
+    """The safety layer ``spec`` names (see :func:`hazardhunt.sut.plugins.build_safety_layer`)."""
+    return build_safety_layer(spec.path, spec.params, spec.search_path)
