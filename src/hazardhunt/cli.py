@@ -22,7 +22,7 @@ from rich.table import Table
 
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
-from hazardhunt.testers.registry import TESTERS
+from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
 if TYPE_CHECKING:
@@ -119,7 +119,10 @@ SafetyLayerParamOption = Annotated[
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
-    tester: Annotated[str, typer.Option(help=f"{', '.join(TESTERS)}.")],
+    tester: Annotated[
+        str,
+        typer.Option(help=f"{', '.join(TESTERS)}, or your own tester as package.module:Class."),
+    ],
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
@@ -144,15 +147,17 @@ def run_command(
     from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
     from hazardhunt.campaign.runner import run_into
 
+    tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
         lambda: RunConfig(
             scenario=scenario,
             field=field,
+            tester_plugin=tester_plugin,
             tester=tester,
             seed=seed,
             episodes=episodes,
             env=EnvOptions(decision_period=decision_period, solver=solver),
-            tester_params=_assignments("--tester-param", tester_param),
+            tester_params={} if tester_plugin else _assignments("--tester-param", tester_param),
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
         )

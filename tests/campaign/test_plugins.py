@@ -1,6 +1,6 @@
-"""Your own controller and safety layer, loaded by import path from the command line and from
-campaign files: the worked example finds failures, bad plug-ins are clear errors, and a
-controller that raises is a recorded sut_error."""
+"""Your own controller, safety layer and tester, loaded by import path from the command line and
+from campaign files: the worked example finds failures, bad plug-ins are clear errors, a
+controller that raises is a recorded sut_error, and configuration builds nothing."""
 
 import json
 import shutil
@@ -223,3 +223,157 @@ def test_a_campaign_file_builds_each_plug_in_once_however_many_runs(tmp_path):
     assert constructions(tmp_path) == 1
     assert len(config.runs()) == 8
     assert constructions(tmp_path) == 1
+
+
+TESTER_MODULE = """
+    import math
+    from pathlib import Path
+
+    import numpy as np
+
+    class Charge:
+        \"\"\"Waits beside the main aisle of the crossing, then runs into the robot's side.\"\"\"
+
+        name = "charge"
+        reward = "max"
+
+        def __init__(self, seed, speed=1.5):
+            self.seed = seed
+            self.speed = speed
+
+        def explore(self, env, episodes):
+            agv = env.agv
+            env.reset(seed=self.seed)
+            while env.episodes_done < episodes:
+                _, _, terminated, truncated, _ = env.step(self.action(agv))
+                if (terminated or truncated) and env.episodes_done < episodes:
+                    env.reset()
+
+        def action(self, agv):
+            x, y, heading = agv.human_pose
+            robot = agv.robot_state
+            if robot.x > x - 0.45:
+                target, speed = (robot.x, robot.y), self.speed
+            elif y < 8.8:
+                target, speed = (10.0, 8.8), self.speed
+            else:
+                target, speed = (x, y + 1.0), 0.0
+            error = math.atan2(target[1] - y, target[0] - x) - heading
+            error = math.atan2(math.sin(error), math.cos(error))
+            human = agv.human_params
+            turn = np.clip(error / agv.decision_period, -human.max_turn_rate, human.max_turn_rate)
+            return np.array(
+                [2.0 * speed / human.max_speed - 1.0, turn / human.max_turn_rate],
+                dtype=np.float32,
+            )
+
+        def save(self, directory):
+            directory.mkdir(parents=True, exist_ok=True)
+            (directory / "charge.txt").write_text(f"speed={self.speed}\\n")
+
+    class Sleepy:
+        name = "sleepy"
+        reward = "max"
+
+        def __init__(self, seed):
+            pass
+
+        def save(self, directory):
+            pass
+"""
+
+
+@pytest.fixture(scope="module")
+def charged(tmp_path_factory):
+    """A run of the Charge tester plug-in."""
+    folder = tmp_path_factory.mktemp("plugins")
+    plugin_module(folder, TESTER_MODULE, "my_testers")
+    out = folder / "run"
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--episodes", 3,
+        "--decision-period", 0.2, "--out", out, "--json",
+        "--tester", "my_testers:Charge", "--tester-param", "speed=1.5",
+        cwd=folder,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return folder, out, json.loads(done.stdout)
+
+
+def test_a_tester_plug_in_runs_its_episodes(charged):
+    _, out, summary = charged
+    assert summary["tester"] == "my_testers:Charge"
+    assert summary["episodes"] == 3
+    assert summary["failures"] == 3  # the charge hits the robot's right side every time
+    assert set(pd.read_parquet(out / "failures.parquet")["class"]) == {"right/moving"}
+    assert (out / "tester" / "charge.txt").read_text() == "speed=1.5\n"
+    run = json.loads((out / "config.json").read_text())["run"]
+    assert run["tester_plugin"]["path"] == "my_testers:Charge"
+    assert run["tester_plugin"]["params"] == {"speed": 1.5}
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["nowhere:Tester"], "'nowhere:Tester': cannot import module 'nowhere'"),
+        (["my_testers:Sleepy"], "'my_testers:Sleepy' does not satisfy the Tester protocol: "
+         "it lacks explore"),
+        (["my_testers:Charge", "--tester-param", "sped=1"],
+         "'my_testers:Charge' does not take these parameters: got an unexpected keyword "
+         "argument 'sped'"),
+    ],
+)  # fmt: skip
+def test_a_bad_tester_plug_in_is_one_clear_line_and_runs_nothing(tmp_path, options, message):
+    plugin_module(tmp_path, TESTER_MODULE, "my_testers")
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--episodes", 3,
+        "--out", tmp_path / "run", "--tester", *options, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith("error: tester: ")
+    assert message in line
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_campaign_runs_a_tester_plug_in_beside_a_built_in_one(tmp_path):
+    plugin_module(tmp_path, TESTER_MODULE, "mixed_testers")
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random", "charge"]\n'
+        "seeds = [0]\nepisodes = 2\n[env]\ndecision_period = 0.2\n"
+        '[tester.charge]\npath = "mixed_testers:Charge"\nspeed = 1.5\n'
+    )
+    config = load_campaign(campaign)
+    assert config.tester_plugins["charge"].params == {"speed": 1.5}
+    out = tmp_path / "results"
+    done = hazardhunt("campaign", campaign, "--out", out, cwd=Path("/"))
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (out / "runs").iterdir()) == [
+        "crossing__none__charge__seed0",
+        "crossing__none__random__seed0",
+    ]
+    summary = json.loads(
+        (out / "runs" / "crossing__none__charge__seed0" / "summary.json").read_text()
+    )
+    assert (summary["tester"], summary["failures"]) == ("charge", 2)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ('[tester.random]\npath = "campaign_testers:Charge"\n',
+         "tester.random: 'random' is a built-in tester"),
+        ('[tester.charge]\npath = "campaign_testers:Sleepy"\n',
+         "tester.charge: 'campaign_testers:Sleepy' does not satisfy the Tester protocol"),
+        ("", "testers: unknown tester 'charge'"),
+    ],
+)  # fmt: skip
+def test_a_campaign_file_with_a_bad_tester_plug_in_names_the_file_and_key(tmp_path, table, message):
+    plugin_module(tmp_path, TESTER_MODULE, "campaign_testers")
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random", "charge"]\n'
+        f"seeds = [0]\nepisodes = 2\n{table}"
+    )
+    with pytest.raises(ConfigError, match=f"campaign.toml: {message}"):
+        load_campaign(campaign)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 import sys
 from collections.abc import Callable
@@ -18,7 +19,12 @@ from pydantic import (
     field_validator,
 )
 
-from hazardhunt.campaign.plugins import PluginSpec, make_controller, make_safety_layer
+from hazardhunt.campaign.plugins import (
+    PluginSpec,
+    make_controller,
+    make_plugin_tester,
+    make_safety_layer,
+)
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.testers.registry import TESTERS, make_tester
@@ -84,7 +90,16 @@ def _check_fields(scenario: str, fields: list[str]) -> None:
 
 def _check_tester(value: str) -> str:
     if value not in TESTERS:
-        raise ValueError(f"unknown tester {value!r}: use one of {', '.join(TESTERS)}")
+        raise ValueError(
+            f"unknown tester {value!r}: use one of {', '.join(TESTERS)} or your own "
+            "(package.module:Class)"
+        )
+    return value
+
+
+def _check_plugin_name(value: str) -> str:
+    if value in TESTERS:
+        raise ValueError(f"{value!r} is a built-in tester; give your own tester another name")
     return value
 
 
@@ -94,6 +109,8 @@ FieldSetting = Annotated[str, Field(min_length=1)]
 """A protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
 TesterName = Annotated[str, AfterValidator(_check_tester)]
 """A registered tester (``hazardhunt.testers.TESTERS``)."""
+PluginTesterName = Annotated[str, Field(min_length=1), AfterValidator(_check_plugin_name)]
+"""The name of a user's tester: any but a registered tester's."""
 
 
 class RunConfig(_Strict):
@@ -103,15 +120,19 @@ class RunConfig(_Strict):
     """A built-in scenario name or a scenario file."""
     field: FieldSetting
     """Protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
-    tester: TesterName
-    """The search method: a registered tester (``TESTERS``)."""
+    # Before ``tester``: its check needs to know whether the name is a plug-in's.
+    tester_plugin: PluginSpec | None = None
+    """A user's tester, whose name ``tester`` is; None for a registered tester."""
+    tester: str = Field(min_length=1)
+    """The search method: a registered tester (``TESTERS``) or the name of a user's."""
     seed: int = Field(ge=0)
     """Seeds every random choice of the run."""
     episodes: int = Field(gt=0)
     """Budget: number of episodes."""
     env: EnvOptions = EnvOptions()
     tester_params: dict[str, Any] = {}
-    """Keyword parameters of the tester (for PPO: Stable-Baselines3 PPO arguments)."""
+    """Keyword parameters of a registered tester (for PPO: Stable-Baselines3 PPO arguments); a
+    user's tester takes those of ``tester_plugin``."""
     controller: PluginSpec | None = None
     """The robot's controller; the built-in NMPC when None."""
     safety_layer: PluginSpec | None = None
@@ -124,18 +145,33 @@ class RunConfig(_Strict):
             _check_fields(info.data["scenario"], [value])
         return value
 
+    @field_validator("tester")
+    @classmethod
+    def _tester_ok(cls, value: str, info: ValidationInfo) -> str:
+        if info.data.get("tester_plugin") is None:
+            return _check_tester(value)
+        return _check_plugin_name(value)
+
     @field_validator("tester_params")
     @classmethod
     def _tester_accepts_params(cls, values: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
-        if "tester" in info.data:  # else the tester's own error is reported
+        if "tester" not in info.data:  # the tester's own error is reported
+            return values
+        if info.data.get("tester_plugin") is not None:
+            if values:
+                raise ValueError("a user's tester takes the parameters of tester_plugin")
+        else:
             _check_tester_params(info.data["tester"], values)
         return values
 
     @property
     def run_id(self) -> str:
         """A file-system-safe name for the run, unique within a campaign."""
-        scenario = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(self.scenario).stem)
-        return f"{scenario}__{self.field}__{self.tester}__seed{self.seed}"
+        scenario, tester = (
+            re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+            for name in (Path(self.scenario).stem, self.tester)
+        )
+        return f"{scenario}__{self.field}__{tester}__seed{self.seed}"
 
 
 class CampaignConfig(_Strict):
@@ -143,12 +179,16 @@ class CampaignConfig(_Strict):
 
     scenarios: list[ScenarioName] = Field(min_length=1)
     fields: list[FieldSetting] = Field(min_length=1)
-    testers: list[TesterName] = Field(min_length=1)
+    # Before ``testers``: their check needs to know the plug-ins' names.
+    tester_plugins: dict[PluginTesterName, PluginSpec] = {}
+    """Users' testers by name (in a campaign file, a ``[tester.NAME]`` table with a ``path``)."""
+    testers: list[str] = Field(min_length=1)
+    """Registered testers and names of ``tester_plugins``."""
     seeds: list[int] = Field(min_length=1)
     episodes: int = Field(gt=0)
     env: EnvOptions = EnvOptions()
     tester: dict[TesterName, dict[str, Any]] = {}
-    """Per-tester keyword parameters, e.g. ``[tester.ppo-max]``."""
+    """Per registered tester its keyword parameters, e.g. ``[tester.ppo-max]``."""
     controller: PluginSpec | None = None
     """The robot's controller of every run (``[controller]``); the built-in NMPC when None."""
     safety_layer: PluginSpec | None = None
@@ -161,11 +201,17 @@ class CampaignConfig(_Strict):
             _check_fields(scenario, values)
         return values
 
+    @field_validator("testers")
+    @classmethod
+    def _testers_known(cls, values: list[str], info: ValidationInfo) -> list[str]:
+        for name in values:
+            if name not in info.data.get("tester_plugins", {}):
+                _check_tester(name)
+        return values
+
     @field_validator("tester")
     @classmethod
-    def _testers_accept_params(
-        cls, values: dict[TesterName, dict[str, Any]]
-    ) -> dict[TesterName, dict[str, Any]]:
+    def _testers_accept_params(cls, values: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         for name, params in values.items():
             _check_tester_params(name, params)
         return values
@@ -185,6 +231,7 @@ class CampaignConfig(_Strict):
             RunConfig(
                 scenario=scenario,
                 field=field,
+                tester_plugin=self.tester_plugins.get(tester),
                 tester=tester,
                 seed=seed,
                 episodes=self.episodes,
@@ -229,9 +276,11 @@ def load_campaign(path: Path) -> CampaignConfig:
             for name in scenarios
         ]
     # A plug-in's module is found next to the campaign file or in the working directory.
+    search_path = [str(path.parent.resolve()), str(Path.cwd())]
     for key in ("controller", "safety_layer"):
         if isinstance(data.get(key), dict) and "search_path" not in data[key]:
-            data[key]["search_path"] = [str(path.parent.resolve()), str(Path.cwd())]
+            data[key]["search_path"] = search_path
+    data["tester_plugins"] = _tester_plugins(path, data.get("tester"), search_path)
     try:
         config = CampaignConfig.model_validate(data)
     except ValidationError as error:
@@ -241,6 +290,29 @@ def load_campaign(path: Path) -> CampaignConfig:
     except ConfigError as error:
         raise ConfigError(f"{path}: {error}") from None
     return config
+
+
+def _tester_plugins(
+    path: Path, tables: object, search_path: list[str]
+) -> dict[str, dict[str, Any]]:
+    """Takes the ``[tester.NAME]`` tables that have a ``path`` (a user's tester) out of
+    ``tables``; returns them as ``tester_plugins``: the path, and the other keys as parameters."""
+    if not isinstance(tables, dict):
+        return {}
+    plugins = {}
+    for name in [n for n, table in tables.items() if isinstance(table, dict) and "path" in table]:
+        params = tables.pop(name)
+        import_path = params.pop("path")
+        try:
+            _check_plugin_name(name)
+        except ValueError as error:
+            raise ConfigError(f"{path}: tester.{name}: {error}") from None
+        if not isinstance(import_path, str):
+            raise ConfigError(
+                f"{path}: tester.{name}.path: must be a string 'package.module:Class'"
+            )
+        plugins[name] = {"path": import_path, "params": params, "search_path": search_path}
+    return plugins
 
 
 def check_plugins(config: RunConfig | CampaignConfig) -> None:
@@ -262,8 +334,17 @@ def _plugins(
     config: RunConfig | CampaignConfig,
 ) -> list[tuple[str, PluginSpec, Callable[[PluginSpec], object]]]:
     """Every plug-in of ``config``: its key, its specification and what builds it."""
+    if isinstance(config, RunConfig):
+        seed, testers = config.seed, {"tester": config.tester_plugin}
+    else:
+        seed = config.seeds[0]
+        testers = {f"tester.{name}": spec for name, spec in config.tester_plugins.items()}
     named: list[tuple[str, PluginSpec | None, Callable[[PluginSpec], object]]] = [
         ("controller", config.controller, make_controller),
         ("safety_layer", config.safety_layer, make_safety_layer),
+        *(
+            (key, spec, functools.partial(make_plugin_tester, seed=seed))
+            for key, spec in testers.items()
+        ),
     ]
     return [(key, spec, build) for key, spec, build in named if spec is not None]

@@ -1,5 +1,5 @@
 """A user's plug-in as configuration names it (an import path and keyword parameters), and how
-each kind is built from it: controller and safety layer.
+each kind is built from it: controller, safety layer and tester.
 
 Configuration only names plug-ins; nothing is imported while it is validated. They are built
 where they are used (a run builds its own) and checked once where a campaign file or a command
@@ -14,6 +14,8 @@ from pydantic import BaseModel, ConfigDict
 
 from hazardhunt.sut.plugins import build_controller, build_safety_layer
 from hazardhunt.sut.protocols import Controller, SafetyLayer
+from hazardhunt.testers.base import Tester
+from hazardhunt.testers.registry import build_tester
 
 
 class PluginSpec(BaseModel):
@@ -38,3 +40,9 @@ def make_controller(spec: PluginSpec) -> Controller:
 def make_safety_layer(spec: PluginSpec) -> SafetyLayer:
     """The safety layer ``spec`` names (see :func:`hazardhunt.sut.plugins.build_safety_layer`)."""
     return build_safety_layer(spec.path, spec.params, spec.search_path)
+
+
+def make_plugin_tester(spec: PluginSpec, seed: int) -> Tester:
+    """The tester ``spec`` names, for a run with ``seed`` (see
+    :func:`hazardhunt.testers.registry.build_tester`)."""
+    return build_tester(spec.path, seed, spec.params, spec.search_path)

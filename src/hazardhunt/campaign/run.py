@@ -12,14 +12,19 @@ from typing import Any
 
 import hazardhunt
 from hazardhunt.campaign.config import EnvOptions, RunConfig
-from hazardhunt.campaign.plugins import PluginSpec, make_controller, make_safety_layer
+from hazardhunt.campaign.plugins import (
+    PluginSpec,
+    make_controller,
+    make_plugin_tester,
+    make_safety_layer,
+)
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
 from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
-from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder
+from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester
 from hazardhunt.world.scenario import Scenario
 
 
@@ -68,6 +73,17 @@ def build_env(
     )
 
 
+def make_run_tester(config: RunConfig) -> Tester:
+    """The tester a run's configuration names: a registered one, or a user's plug-in.
+
+    Raises:
+        PluginError: A plug-in does not load.
+    """
+    if config.tester_plugin is None:
+        return make_tester(config.tester, config.seed, config.tester_params)
+    return make_plugin_tester(config.tester_plugin, config.seed)
+
+
 def execute_run(
     config: RunConfig, directory: Path, progress: ProgressCallback | None = None
 ) -> dict[str, Any]:
@@ -78,7 +94,7 @@ def execute_run(
     """
     directory.mkdir(parents=True)
     started_at = datetime.now(timezone.utc).isoformat()
-    tester = make_tester(config.tester, config.seed, config.tester_params)
+    tester = make_run_tester(config)
     env = make_env(config, tester.reward)
     classifier = MechanismClassifier(robot=env.robot_params)
     write_json_atomic(

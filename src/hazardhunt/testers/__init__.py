@@ -1,4 +1,4 @@
-"""Search methods that choose the human's actions: random sampling and PPO, by name."""
+"""Search methods that choose the human's actions: random sampling, PPO, and one's own."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester
 from hazardhunt.testers.registry import (
     TESTERS,
     RegisteredTester,
+    build_tester,
     make_tester,
     register_tester,
 )
@@ -16,6 +17,7 @@ __all__ = [
     "EpisodeRecorder",
     "RegisteredTester",
     "Tester",
+    "build_tester",
     "make_tester",
     "register_tester",
 ]

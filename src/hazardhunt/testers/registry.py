@@ -1,21 +1,27 @@
-"""The testers hazardhunt knows by name.
+"""The testers hazardhunt knows by name, and testers of one's own loaded by import path.
 
 Every built-in tester registers here with what the rest of hazardhunt needs to know about it: how
 to build one, the reward it learns from, a line that describes it and the colour it has in every
 figure. The command line, the configuration's checks and the report read this registry rather
 than a list of names of their own.
+
+A user's tester needs no registration: it is named by import path (``package.module:Class``)
+and called as ``Class(seed=..., **params)``, like a built-in tester's factory. An import path
+works in every worker process and on every Ray node, which a registration made at run time in
+the user's own process would not reach.
 """
 
 from __future__ import annotations
 
 import inspect
 import zlib
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
 from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester
 from hazardhunt.testers.random_sampling import RandomTester
 
@@ -80,6 +86,28 @@ def make_tester(name: str, seed: int, params: Mapping[str, Any] | None = None) -
     except TypeError as error:
         raise ValueError(f"tester {name!r} does not take these parameters: {error}") from None
     return factory(seed=seed, **params)
+
+
+def build_tester(
+    path: str, seed: int, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
+) -> Tester:
+    """A user's tester: ``Class(seed=seed, **params)`` for the class (or factory) at import path
+    ``path``, checked against the :class:`~hazardhunt.testers.base.Tester` protocol.
+
+    Raises:
+        PluginError: Naming the path and what is wrong.
+    """
+    params = dict(params or {})
+    if "seed" in params:
+        raise PluginError(f"{path!r}: parameter 'seed' is set by hazardhunt (the run's seed)")
+    tester: Tester = build("tester", path, {"seed": seed, **params}, Tester, search_path)
+    return tester
+
+
+def is_import_path(tester: str) -> bool:
+    """Whether ``tester`` names a plug-in (``package.module:Class``) rather than a registered
+    tester."""
+    return ":" in tester
 
 
 def sort_testers(names: Iterable[str]) -> list[str]:
