@@ -113,6 +113,31 @@ SafetyLayerOption = Annotated[
 SafetyLayerParamOption = Annotated[
     list[str] | None, typer.Option(help="A safety-layer parameter as KEY=VALUE; repeatable.")
 ]
+ClassifierParamOption = Annotated[
+    list[str] | None, typer.Option(help="A classifier parameter as KEY=VALUE; repeatable.")
+]
+RunClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Your failure classifier as package.module:Class, instead of the built-in one (or, "
+        "for campaign, of the campaign file's [classifier])."
+    ),
+]
+ReadClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Classify every failure anew with your failure classifier (package.module:Class). "
+        "Without it, the classes the runs recorded count: hazardhunt never imports code named "
+        "in results."
+    ),
+]
+RegressClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Classify the replayed failures with your failure classifier (package.module:Class) "
+        "instead of the built-in one; needed for cases classified by a plug-in."
+    ),
+]
 
 
 @app.command("run")
@@ -139,6 +164,8 @@ def run_command(
     controller_param: ControllerParamOption = None,
     safety_layer: SafetyLayerOption = None,
     safety_layer_param: SafetyLayerParamOption = None,
+    classifier: RunClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
@@ -160,6 +187,7 @@ def run_command(
             tester_params={} if tester_plugin else _assignments("--tester-param", tester_param),
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
+            classifier=_plugin("--classifier", classifier, classifier_param),
         )
     )
     check_plugins(config)
@@ -234,6 +262,8 @@ def campaign(
     address: Annotated[
         str | None, typer.Option(help="Address of an existing Ray cluster (with --executor ray).")
     ] = None,
+    classifier: RunClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign.
 
@@ -248,7 +278,7 @@ def campaign(
         raise typer.BadParameter("must be at least 1", param_hint="--workers")
     if address is not None and executor != "ray":
         raise typer.BadParameter("only with --executor ray", param_hint="--address")
-    config = load_campaign(file)
+    config = load_campaign(file, _plugin("--classifier", classifier, classifier_param))
     try:
         run_campaign(
             config, out, workers=workers, executor=executor, address=address, console=console
@@ -263,20 +293,23 @@ def report(
     reclassify: Annotated[
         bool,
         typer.Option(
-            help="Classify every failure anew from its trajectory with the current taxonomy."
+            help="Classify every failure anew from its trajectory with the built-in taxonomy "
+            "(or --classifier's)."
         ),
     ] = False,
+    classifier: ReadClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write the study's figures and tables for a run or campaign into DIRECTORY/report."""
     from hazardhunt.analysis.report import write_report
-    from hazardhunt.spec.failure_classes import MechanismClassifier
+    from hazardhunt.campaign.plugins import make_classifier
 
+    spec = _plugin("--classifier", classifier, classifier_param)
+    chosen = make_classifier(spec) if spec is not None or reclassify else None
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
-            directory,
-            lambda step: progress.update(task, description=f"report: {step}"),
-            MechanismClassifier() if reclassify else None,
+            directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
 
@@ -295,16 +328,19 @@ def export(
             "--pytest", help="Also write test_hazardhunt_cases.py: the cases as pytest tests."
         ),
     ] = False,
+    classifier: ReadClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write failures as self-contained regression cases (TOML), to re-run with regress."""
     from hazardhunt.campaign.cases import export_cases, write_pytest_module
 
-    written = export_cases(directory, out, every_failure=all_failures)
+    spec = _plugin("--classifier", classifier, classifier_param)
+    written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
     if not written:
         console.print("the results hold no failure")
     if pytest_module:
-        console.print(f"pytest module written to [bold]{write_pytest_module(out)}[/bold]")
+        console.print(f"pytest module written to [bold]{write_pytest_module(out, spec)}[/bold]")
 
 
 @app.command()
@@ -317,6 +353,8 @@ def regress(
     field: Annotated[
         str | None, typer.Option(help="Re-run with this field setting instead of the case's.")
     ] = None,
+    classifier: RegressClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print the results as JSON on stdout.")
     ] = False,
@@ -329,6 +367,7 @@ def regress(
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
+    classifier_spec = _plugin("--classifier", classifier, classifier_param)
     files = case_files(cases)
     results = []
     with Progress(console=err_console, transient=True) as progress:
@@ -336,7 +375,11 @@ def regress(
         for path in files:
             results.append(
                 regress_case(
-                    path, controller=controller_spec, safety_layer=safety_spec, field=field
+                    path,
+                    controller=controller_spec,
+                    safety_layer=safety_spec,
+                    field=field,
+                    classifier=classifier_spec,
                 )
             )
             progress.advance(task)

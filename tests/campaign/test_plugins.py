@@ -1,6 +1,7 @@
-"""Your own controller, safety layer and tester, loaded by import path from the command line and
-from campaign files: the worked example finds failures, bad plug-ins are clear errors, a
-controller that raises is a recorded sut_error, and configuration builds nothing."""
+"""Your own controller, safety layer, tester and failure classifier, loaded by import path from
+the command line and from campaign files: the worked example finds failures, bad plug-ins are
+clear errors, a controller that raises is a recorded sut_error, configuration builds nothing,
+and code named in results is never imported by reading them."""
 
 import json
 import shutil
@@ -282,33 +283,90 @@ TESTER_MODULE = """
             pass
 """
 
+CLASSIFIER_MODULE = """
+    from pathlib import Path
+
+    Path(__file__).with_name("classifier-imported").touch()
+
+    FACES = ("front", "left", "right", "rear")
+
+    class ByFace:
+        \"\"\"Names a failure by the face the human touched.\"\"\"
+
+        name = "by-face"
+
+        def __init__(self, prefix="hit"):
+            self.prefix = prefix
+
+        def classes_for(self, field_diameter):
+            return (*(f"{self.prefix}/{face}" for face in FACES), "other")
+
+        def classify(self, trajectory, summary, field_diameter):
+            face = summary.get("contact_face")
+            return f"{self.prefix}/{face}" if face in FACES else "other"
+"""
+
 
 @pytest.fixture(scope="module")
 def charged(tmp_path_factory):
-    """A run of the Charge tester plug-in."""
+    """A run of the Charge tester plug-in, its failures classified by the ByFace plug-in."""
     folder = tmp_path_factory.mktemp("plugins")
     plugin_module(folder, TESTER_MODULE, "my_testers")
+    plugin_module(folder, CLASSIFIER_MODULE, "my_classes")
     out = folder / "run"
     done = hazardhunt(
         "run", "--scenario", "crossing", "--field", "none", "--episodes", 3,
         "--decision-period", 0.2, "--out", out, "--json",
         "--tester", "my_testers:Charge", "--tester-param", "speed=1.5",
+        "--classifier", "my_classes:ByFace", "--classifier-param", "prefix=struck",
         cwd=folder,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
+    (folder / "classifier-imported").unlink()
     return folder, out, json.loads(done.stdout)
 
 
-def test_a_tester_plug_in_runs_its_episodes(charged):
+def test_a_tester_plug_in_runs_and_a_classifier_plug_in_names_its_failures(charged):
     _, out, summary = charged
     assert summary["tester"] == "my_testers:Charge"
     assert summary["episodes"] == 3
     assert summary["failures"] == 3  # the charge hits the robot's right side every time
-    assert set(pd.read_parquet(out / "failures.parquet")["class"]) == {"right/moving"}
+    assert summary["classifier"] == "by-face"
+    assert summary["classes"] == ["struck/right"]
+    assert summary["classes_total"] == 4
+    assert set(pd.read_parquet(out / "failures.parquet")["class"]) == {"struck/right"}
     assert (out / "tester" / "charge.txt").read_text() == "speed=1.5\n"
     run = json.loads((out / "config.json").read_text())["run"]
     assert run["tester_plugin"]["path"] == "my_testers:Charge"
     assert run["tester_plugin"]["params"] == {"speed": 1.5}
+    assert run["classifier"]["path"] == "my_classes:ByFace"
+    assert run["classifier"]["params"] == {"prefix": "struck"}
+
+
+def test_reading_results_never_imports_the_classifier_they_name(charged):
+    folder, out, _ = charged
+    report = hazardhunt("report", out, cwd=folder)
+    assert report.returncode == 0, report.stderr
+    classes = pd.read_csv(out / "report" / "tables" / "classes.csv")
+    assert classes[["classes", "k / K"]].values.tolist() == [["struck/right", "1 / 4"]]
+    cases = folder / "cases"
+    export = hazardhunt("export", out, "--out", cases, cwd=folder)
+    assert export.returncode == 0, export.stderr
+    (case,) = cases.glob("*.toml")
+    assert 'path = "my_classes:ByFace"' in case.read_text()
+    refused = hazardhunt("regress", cases, cwd=folder)
+    assert refused.returncode == 2
+    [line] = refused.stderr.strip().splitlines()
+    assert "'my_classes:ByFace'" in line
+    assert "regress --classifier" in line
+    assert not (folder / "classifier-imported").exists()
+    named = hazardhunt(
+        "regress", cases, "--json", "--classifier", "my_classes:ByFace",
+        "--classifier-param", "prefix=struck", cwd=folder,
+    )  # fmt: skip
+    assert named.returncode == 1, named.stderr
+    [result] = json.loads(named.stdout)["cases"]
+    assert (result["verdict"], result["failure_class"]) == ("still fails", "struck/right")
 
 
 @pytest.mark.parametrize(

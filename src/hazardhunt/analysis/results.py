@@ -9,8 +9,10 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from pydantic import ValidationError
 
 from hazardhunt.campaign.config import CampaignConfig
+from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.run import is_complete
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
@@ -19,6 +21,7 @@ from hazardhunt.spec.failure_classes import (
 )
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from hazardhunt.testers.registry import sort_testers
+from hazardhunt.world.scenario import format_validation_error
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
@@ -43,11 +46,16 @@ class Results:
     """One row per episode flagged as loitering (``loitering.parquet``), with the run's keys."""
     unfinished: list[str] = field(default_factory=list)
     """Run ids of the campaign that have not finished (they are left out of every table)."""
-    classifier: FailureClassifier = MechanismClassifier()
+    classifier: FailureClassifier | None = MechanismClassifier()
+    """The taxonomy of the ``class`` column: the classifier that classified the failures anew,
+    else the built-in one if every run recorded it, else None (runs classified by a plug-in
+    that was not named again: their recorded classes stand, read as data)."""
 
-    def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...]:
+    def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...] | None:
         """The classes a failure can have under a field setting (of ``scenario`` when it
-        defines its own fields), ``other`` last."""
+        defines its own fields), ``other`` last; None without a known ``classifier``."""
+        if self.classifier is None:
+            return None
         return self.classifier.classes_for(setting_diameter(field_setting, scenario))
 
     def run_directory(self, run_id: str) -> Path:
@@ -57,6 +65,9 @@ class Results:
 
 def load_results(directory: Path, classifier: FailureClassifier | None = None) -> Results:
     """Read a run directory or a campaign directory (its finished runs).
+
+    Nothing that the results name is imported: a failure classifier the runs recorded by
+    import path is not loaded; their recorded classes are read instead.
 
     Args:
         directory: A run or campaign directory.
@@ -91,7 +102,12 @@ def load_results(directory: Path, classifier: FailureClassifier | None = None) -
         for name in ("episodes", "failures", "loitering")
     }
     if classifier is None:
-        return Results(directory, runs, unfinished=unfinished, **tables)
+        plugins = [
+            recorded_classifier(config, path / "config.json")
+            for config, path in zip(configs, run_directories, strict=True)
+        ]
+        recorded = MechanismClassifier() if all(p is None for p in plugins) else None
+        return Results(directory, runs, unfinished=unfinished, classifier=recorded, **tables)
     tables["failures"] = _reclassified(tables["failures"], runs, classifier)
     return Results(directory, runs, unfinished=unfinished, classifier=classifier, **tables)
 
@@ -117,6 +133,16 @@ def _reclassified(
         )
         relabelled.loc[group.index, "class"] = [classes[i] for i in summaries]
     return relabelled
+
+
+def recorded_classifier(config: dict[str, Any], path: Path) -> PluginSpec | None:
+    """The failure classifier plug-in a run recorded in ``config``, its ``config.json`` at
+    ``path``, as data (None: the built-in classifier). Nothing is imported."""
+    spec = config.get("run", {}).get("classifier")
+    try:
+        return None if spec is None else PluginSpec.model_validate(spec)
+    except ValidationError as error:
+        raise ResultsError(f"{path}: run.{format_validation_error(error)}") from None
 
 
 def _campaign_runs(directory: Path) -> tuple[list[Path], list[str]]:

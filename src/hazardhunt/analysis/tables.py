@@ -36,18 +36,24 @@ def failures_per_run(runs: pd.DataFrame) -> pd.DataFrame:
 def class_coverage(results: Results) -> pd.DataFrame:
     """Table I: the distinct classes found over all seeds, ``k / K``, beside the study's.
 
-    ``other`` is listed but not counted in k; K is the number of named classes.
+    ``other`` is listed but not counted in k; K is the number of named classes (as the runs
+    recorded it when the results' classifier is not known).
     """
     rows = []
-    for (scenario, field, tester), _ in results.runs.groupby(["scenario", "field", "tester"]):
-        named = results.classes_for(field, scenario)[:-1]
-        failures = results.failures
+    failures = results.failures
+    for (scenario, field, tester), runs in results.runs.groupby(["scenario", "field", "tester"]):
         mask = (
             (failures["scenario"] == scenario)
             & (failures["field"] == field)
             & (failures["tester"] == tester)
         )
         found = set(failures.loc[mask, "class"]) if "class" in failures else set()
+        classes = results.classes_for(field, scenario)
+        if classes is None:
+            total = int(runs["classes_total"].max())
+            classes = (*sorted(found - {OTHER}), OTHER)
+        else:
+            total = len(classes) - 1
         study = STUDY_CLASSES.get((scenario, field), {}).get(tester)
         rows.append(
             {
@@ -55,10 +61,10 @@ def class_coverage(results: Results) -> pd.DataFrame:
                 "field": field,
                 "tester": tester,
                 "found": len(found - {OTHER}),
-                "total": len(named),
-                "k / K": f"{len(found - {OTHER})} / {len(named)}",
+                "total": total,
+                "k / K": f"{len(found - {OTHER})} / {total}",
                 "study k / K": f"{study[0]} / {study[1]}" if study else "",
-                "classes": ", ".join(name for name in (*named, OTHER) if name in found),
+                "classes": ", ".join(name for name in classes if name in found),
             }
         )
     return in_tester_order(pd.DataFrame(rows), ("scenario", "field"))

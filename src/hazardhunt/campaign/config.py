@@ -21,6 +21,7 @@ from pydantic import (
 
 from hazardhunt.campaign.plugins import (
     PluginSpec,
+    make_classifier,
     make_controller,
     make_plugin_tester,
     make_safety_layer,
@@ -137,6 +138,8 @@ class RunConfig(_Strict):
     """The robot's controller; the built-in NMPC when None."""
     safety_layer: PluginSpec | None = None
     """The safety layer; the laser field of ``field`` when None."""
+    classifier: PluginSpec | None = None
+    """Names each failure's class; the built-in mechanism taxonomy when None."""
 
     @field_validator("field")
     @classmethod
@@ -193,6 +196,8 @@ class CampaignConfig(_Strict):
     """The robot's controller of every run (``[controller]``); the built-in NMPC when None."""
     safety_layer: PluginSpec | None = None
     """The safety layer of every run (``[safety_layer]``); the laser field when None."""
+    classifier: PluginSpec | None = None
+    """The failure classifier of every run (``[classifier]``); the built-in one when None."""
 
     @field_validator("fields")
     @classmethod
@@ -239,6 +244,7 @@ class CampaignConfig(_Strict):
                 tester_params=self.tester.get(tester, {}),
                 controller=self.controller,
                 safety_layer=self.safety_layer,
+                classifier=self.classifier,
             )
             for scenario in self.scenarios
             for field in self.fields
@@ -253,9 +259,13 @@ def _check_tester_params(tester: str, params: dict[str, Any]) -> None:
         make_tester(tester, 0, params)  # builds no model: only checks the parameters
 
 
-def load_campaign(path: Path) -> CampaignConfig:
+def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignConfig:
     """Read and validate a campaign file and check its plug-ins; relative scenario file paths are
     relative to it.
+
+    Args:
+        path: The campaign file.
+        classifier: A failure classifier that replaces the file's ``[classifier]``.
 
     Raises:
         ConfigError: Naming the file, the field and what is wrong.
@@ -275,9 +285,11 @@ def load_campaign(path: Path) -> CampaignConfig:
             else name
             for name in scenarios
         ]
+    if classifier is not None:
+        data["classifier"] = classifier.model_dump()
     # A plug-in's module is found next to the campaign file or in the working directory.
     search_path = [str(path.parent.resolve()), str(Path.cwd())]
-    for key in ("controller", "safety_layer"):
+    for key in ("controller", "safety_layer", "classifier"):
         if isinstance(data.get(key), dict) and "search_path" not in data[key]:
             data[key]["search_path"] = search_path
     data["tester_plugins"] = _tester_plugins(path, data.get("tester"), search_path)
@@ -342,6 +354,7 @@ def _plugins(
     named: list[tuple[str, PluginSpec | None, Callable[[PluginSpec], object]]] = [
         ("controller", config.controller, make_controller),
         ("safety_layer", config.safety_layer, make_safety_layer),
+        ("classifier", config.classifier, make_classifier),
         *(
             (key, spec, functools.partial(make_plugin_tester, seed=seed))
             for key, spec in testers.items()

@@ -14,13 +14,14 @@ import hazardhunt
 from hazardhunt.campaign.config import EnvOptions, RunConfig
 from hazardhunt.campaign.plugins import (
     PluginSpec,
+    make_classifier,
     make_controller,
     make_plugin_tester,
     make_safety_layer,
 )
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
-from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
+from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers import make_tester
@@ -96,7 +97,7 @@ def execute_run(
     started_at = datetime.now(timezone.utc).isoformat()
     tester = make_run_tester(config)
     env = make_env(config, tester.reward)
-    classifier = MechanismClassifier(robot=env.robot_params)
+    classifier = make_classifier(config.classifier, env.robot_params)
     write_json_atomic(
         directory / "config.json",
         {
