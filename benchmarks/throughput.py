@@ -28,7 +28,7 @@ import pandas as pd
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import RunProgress, record_run
 from hazardhunt.sut.nmpc import NMPCController
-from hazardhunt.testers import TESTER_NAMES
+from hazardhunt.testers import TESTERS
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 from nmpc import run_solver  # benchmarks/ is the script's directory
 
@@ -94,7 +94,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=100, help="episodes per run")
     parser.add_argument("--field", default="1.25m")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--testers", nargs="+", default=list(TESTER_NAMES))
+    parser.add_argument("--testers", nargs="+", default=list(TESTERS))
     parser.add_argument("--scenarios", nargs="+", default=list(BUILTIN_SCENARIOS))
     parser.add_argument(
         "--solvers",

@@ -21,10 +21,11 @@ from rich.progress import Progress
 from rich.table import Table
 
 from hazardhunt.campaign.config import ConfigError
+from hazardhunt.testers.registry import TESTERS, is_import_path
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
 if TYPE_CHECKING:
-    from hazardhunt.campaign.config import PluginSpec
-from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
+    from hazardhunt.campaign.plugins import PluginSpec
 
 app = typer.Typer(
     help="Find the human behaviours that make a robot's control stack unsafe.",
@@ -120,13 +121,41 @@ SafetyLayerOption = Annotated[
 SafetyLayerParamOption = Annotated[
     list[str] | None, typer.Option(help="A safety-layer parameter as KEY=VALUE; repeatable.")
 ]
+ClassifierParamOption = Annotated[
+    list[str] | None, typer.Option(help="A classifier parameter as KEY=VALUE; repeatable.")
+]
+RunClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Your failure classifier as package.module:Class, instead of the built-in one (or, "
+        "for campaign, of the campaign file's [classifier])."
+    ),
+]
+ReadClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Classify every failure anew with your failure classifier (package.module:Class). "
+        "Without it, the classes the runs recorded count: hazardhunt never imports code named "
+        "in results."
+    ),
+]
+RegressClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Classify the replayed failures with your failure classifier (package.module:Class) "
+        "instead of the built-in one; needed for cases classified by a plug-in."
+    ),
+]
 
 
 @app.command("run")
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
-    tester: Annotated[str, typer.Option(help="random, ppo-acc or ppo-max.")],
+    tester: Annotated[
+        str,
+        typer.Option(help=f"{', '.join(TESTERS)}, or your own tester as package.module:Class."),
+    ],
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
@@ -143,27 +172,33 @@ def run_command(
     controller_param: ControllerParamOption = None,
     safety_layer: SafetyLayerOption = None,
     safety_layer_param: SafetyLayerParamOption = None,
+    classifier: RunClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
-    from hazardhunt.campaign.config import EnvOptions, RunConfig
+    from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
     from hazardhunt.campaign.run import execute_run
 
+    tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
         lambda: RunConfig(
             scenario=scenario,
             field=field,
+            tester_plugin=tester_plugin,
             tester=tester,
             seed=seed,
             episodes=episodes,
             env=EnvOptions(decision_period=decision_period, solver=solver),
-            tester_params=_assignments("--tester-param", tester_param),
+            tester_params={} if tester_plugin else _assignments("--tester-param", tester_param),
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
+            classifier=_plugin("--classifier", classifier, classifier_param),
         )
     )
+    check_plugins(config)
     summary = execute_run(config, out, console=err_console)
     if json_output:
         print(json.dumps(summary))
@@ -188,7 +223,7 @@ def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
 def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSpec | None:
     """A plug-in's specification from the command line; its module may sit in the working
     directory."""
-    from hazardhunt.campaign.config import PluginSpec
+    from hazardhunt.campaign.plugins import PluginSpec
 
     if path is None:
         if params:
@@ -237,9 +272,14 @@ def campaign(
     address: Annotated[
         str | None, typer.Option(help="Address of an existing Ray cluster (with --executor ray).")
     ] = None,
+    classifier: RunClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
-    """Run every run of a campaign file; run it again to finish an interrupted campaign."""
-    from hazardhunt.campaign.campaign import EXECUTORS, run_campaign
+    """Run every run of a campaign file; run it again to finish an interrupted campaign.
+
+    Exits with code 1 when some runs raised (after the others finished and the report).
+    """
+    from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
     from hazardhunt.campaign.config import load_campaign
 
     if executor not in EXECUTORS:
@@ -248,8 +288,13 @@ def campaign(
         raise typer.BadParameter("must be at least 1", param_hint="--workers")
     if address is not None and executor != "ray":
         raise typer.BadParameter("only with --executor ray", param_hint="--address")
-    config = load_campaign(file)
-    run_campaign(config, out, workers=workers, executor=executor, address=address, console=console)
+    config = load_campaign(file, _plugin("--classifier", classifier, classifier_param))
+    try:
+        run_campaign(
+            config, out, workers=workers, executor=executor, address=address, console=console
+        )
+    except CampaignFailed:
+        raise typer.Exit(1) from None
 
 
 @app.command()
@@ -258,20 +303,23 @@ def report(
     reclassify: Annotated[
         bool,
         typer.Option(
-            help="Classify every failure anew from its trajectory with the current taxonomy."
+            help="Classify every failure anew from its trajectory with the built-in taxonomy "
+            "(or --classifier's)."
         ),
     ] = False,
+    classifier: ReadClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write the study's figures and tables for a run or campaign into DIRECTORY/report."""
     from hazardhunt.analysis.report import write_report
-    from hazardhunt.spec.failure_classes import MechanismClassifier
+    from hazardhunt.campaign.plugins import make_classifier
 
+    spec = _plugin("--classifier", classifier, classifier_param)
+    chosen = make_classifier(spec) if spec is not None or reclassify else None
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
-            directory,
-            lambda step: progress.update(task, description=f"report: {step}"),
-            MechanismClassifier() if reclassify else None,
+            directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
 
@@ -290,16 +338,19 @@ def export(
             "--pytest", help="Also write test_hazardhunt_cases.py: the cases as pytest tests."
         ),
     ] = False,
+    classifier: ReadClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write failures as self-contained regression cases (TOML), to re-run with regress."""
     from hazardhunt.cases import export_cases, write_pytest_module
 
-    written = export_cases(directory, out, every_failure=all_failures)
+    spec = _plugin("--classifier", classifier, classifier_param)
+    written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
     if not written:
         console.print("the results hold no failure")
     if pytest_module:
-        console.print(f"pytest module written to [bold]{write_pytest_module(out)}[/bold]")
+        console.print(f"pytest module written to [bold]{write_pytest_module(out, spec)}[/bold]")
 
 
 @app.command()
@@ -312,6 +363,8 @@ def regress(
     field: Annotated[
         str | None, typer.Option(help="Re-run with this field setting instead of the case's.")
     ] = None,
+    classifier: RegressClassifierOption = None,
+    classifier_param: ClassifierParamOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print the results as JSON on stdout.")
     ] = False,
@@ -324,6 +377,7 @@ def regress(
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
+    classifier_spec = _plugin("--classifier", classifier, classifier_param)
     files = case_files(cases)
     results = []
     with Progress(console=err_console, transient=True) as progress:
@@ -331,7 +385,11 @@ def regress(
         for path in files:
             results.append(
                 regress_case(
-                    path, controller=controller_spec, safety_layer=safety_spec, field=field
+                    path,
+                    controller=controller_spec,
+                    safety_layer=safety_spec,
+                    field=field,
+                    classifier=classifier_spec,
                 )
             )
             progress.advance(task)

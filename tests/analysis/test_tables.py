@@ -35,6 +35,13 @@ def runs(rows):
     return frame
 
 
+def test_tables_list_testers_in_the_registrys_order_then_plug_ins_by_name():
+    table = tables.failure_rates(
+        runs([("crossing", "2m", t, 0, 1) for t in ["mine", "ppo-max", "random", "ppo-acc"]])
+    )
+    assert table["tester"].tolist() == ["random", "ppo-acc", "ppo-max", "mine"]
+
+
 def test_failures_per_run_is_the_mean_and_spread_over_seeds():
     table = tables.failures_per_run(
         runs([("crossing", "2m", "random", seed, k) for seed, k in enumerate([2, 4, 9])])

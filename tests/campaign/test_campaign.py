@@ -273,6 +273,7 @@ def test_a_run_that_raises_is_recorded_and_the_others_complete(tmp_path: Path) -
     out = tmp_path / "campaign"
     result = hazardhunt("campaign", file, "--out", out, "--workers", "2")
     assert result.returncode == 1
+    assert "Traceback" not in result.stderr
     summary = json.loads((out / "summary.json").read_text())
     statuses = {run["run_id"]: run["status"] for run in summary["runs"]}
     assert statuses == {

@@ -9,10 +9,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from hazardhunt.env.rendering import draw_floor
+from hazardhunt.testers.registry import colour_of, sort_testers
 from hazardhunt.world.scenario import load_scenario
-
-TESTER_COLOURS = {"ppo-acc": "#1f77b4", "ppo-max": "#ff7f0e", "random": "#7f7f7f"}
-"""One colour per tester, the same in every figure."""
 
 FIELD_ORDER = ("none", "1.25m", "2m")
 
@@ -20,10 +18,6 @@ FIELD_ORDER = ("none", "1.25m", "2m")
 def _ordered_fields(values: pd.Series) -> list[str]:
     present = list(dict.fromkeys(values))
     return [f for f in FIELD_ORDER if f in present] + [f for f in present if f not in FIELD_ORDER]
-
-
-def _colour(tester: str) -> str:
-    return TESTER_COLOURS.get(tester, "#2ca02c")
 
 
 def _save(figure: Figure, path: Path) -> Path:
@@ -38,7 +32,7 @@ def failures_bar_chart(runs: pd.DataFrame, path: Path) -> Path:
     is the standard deviation over seeds and the dots are the seeds."""
     fields = _ordered_fields(runs["field"])
     scenarios = sorted(runs["scenario"].unique())
-    testers = sorted(runs["tester"].unique())
+    testers = sort_testers(runs["tester"])
     figure = Figure(figsize=(4.2 * len(fields), 3.6), dpi=100)
     width = 0.8 / len(testers)
     for column, field in enumerate(fields):
@@ -64,7 +58,7 @@ def failures_bar_chart(runs: pd.DataFrame, path: Path) -> Path:
                 width,
                 yerr=spreads,
                 capsize=2,
-                color=_colour(tester),
+                color=colour_of(tester),
                 label=tester,
             )
         ax.set_xticks(range(len(scenarios)), scenarios)
@@ -81,13 +75,15 @@ def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:
     figure = Figure(figsize=(4.2 * max(1, len(fields)), 3.4), dpi=100)
     for column, field in enumerate(fields):
         ax = figure.add_subplot(1, len(fields), column + 1)
-        for tester, group in curves[curves["field"] == field].groupby("tester", sort=True):
+        in_field = curves[curves["field"] == field]
+        for tester in sort_testers(in_field["tester"]):
+            group = in_field[in_field["tester"] == tester]
             ax.plot(
                 group["episode"],
                 group["failures per 100 episodes"],
                 marker=".",
-                color=_colour(str(tester)),
-                label=str(tester),
+                color=colour_of(tester),
+                label=tester,
             )
         ax.set_title(f"field {field}")
         ax.set_xlabel("episode")
@@ -101,7 +97,7 @@ def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:
 def failure_heat_map(failures: pd.DataFrame, scenario: str, path: Path) -> Path:
     """Where on the floor the human was at contact, one panel per tester, counted on a 0.5 m
     grid over the floor of ``scenario``."""
-    testers = sorted(failures["tester"].unique()) or ["(none)"]
+    testers = sort_testers(failures["tester"]) or ["(none)"]
     floor_scenario = load_scenario(scenario)
     floor = floor_scenario.floor
     edges_x = np.arange(0.0, floor.width + 0.5, 0.5)
@@ -145,7 +141,7 @@ def failure_rates_figure(rates: pd.DataFrame, path: Path) -> Path:
             position,
             xerr=[[100.0 * low], [100.0 * high]],
             fmt="o",
-            color=_colour(str(row.tester)),
+            color=colour_of(str(row.tester)),
             capsize=2,
             markersize=4,
         )

@@ -25,6 +25,7 @@ import pandas as pd
 import hazardhunt
 from hazardhunt.analysis import figures, tables
 from hazardhunt.analysis.results import Results, load_results
+from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
 from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
@@ -188,7 +189,8 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
     ),
     (
         "Runtime: accumulated vs maximum reward (Table II)",
-        "Mean wall time per run; the speedup of ppo-max is 1 - max / acc as in the study. "
+        f"Mean wall time per run; the speedup of {STUDY_REWARDS[1]} is 1 - max / acc as in the "
+        "study. "
         "'per 20k' scales the measured time per episode to the study's 20,000 episodes.",
         "runtime",
         lambda results, _: tables.runtime_table(results.runs),
@@ -365,7 +367,7 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
         "unfinished_runs": results.unfinished,
         "lesson_1": {
             str(row["tester"]): {
-                "more_failures_than_random": int(row["more failures than random"]),
+                "more_failures_than_random": int(row[f"more failures than {STUDY_BASELINE}"]),
                 "comparisons": int(row["comparisons"]),
             }
             for _, row in lesson.iterrows()

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from pydantic import ValidationError
 
 from hazardhunt.campaign.config import CampaignConfig
+from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.run import is_complete
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
@@ -18,6 +21,8 @@ from hazardhunt.spec.failure_classes import (
     classify_failures,
 )
 from hazardhunt.sut.safety_layer import FieldShape
+from hazardhunt.testers.registry import sort_testers
+from hazardhunt.world.scenario import format_validation_error
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
@@ -42,11 +47,16 @@ class Results:
     """One row per episode flagged as loitering (``loitering.parquet``), with the run's keys."""
     unfinished: list[str] = field(default_factory=list)
     """Run ids of the campaign that have not finished (they are left out of every table)."""
-    classifier: FailureClassifier = MechanismClassifier()
+    classifier: FailureClassifier | None = MechanismClassifier()
+    """The taxonomy of the ``class`` column: the classifier that classified the failures anew,
+    else the built-in one if every run recorded it, else None (runs classified by a plug-in
+    that was not named again: their recorded classes stand, read as data)."""
 
-    def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...]:
+    def classes_for(self, field_setting: str, scenario: str = "") -> tuple[str, ...] | None:
         """The classes a failure can have under a field setting (of ``scenario`` when it
-        defines its own fields), ``other`` last."""
+        defines its own fields), ``other`` last; None without a known ``classifier``."""
+        if self.classifier is None:
+            return None
         return self.classifier.classes_for(self.field_shape(field_setting, scenario))
 
     def field_shape(self, field_setting: str, scenario: str = "") -> FieldShape:
@@ -66,6 +76,9 @@ class Results:
 
 def load_results(directory: Path, classifier: FailureClassifier | None = None) -> Results:
     """Read a run directory or a campaign directory (its finished runs).
+
+    Nothing that the results name is imported: a failure classifier the runs recorded by
+    import path is not loaded; their recorded classes are read instead.
 
     Args:
         directory: A run or campaign directory.
@@ -90,15 +103,22 @@ def load_results(directory: Path, classifier: FailureClassifier | None = None) -
     if not run_directories:
         raise ResultsError(f"{directory}: no run of the campaign has finished yet")
     summaries = [_read_json(path / "summary.json") for path in run_directories]
+    configs = [_read_json(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries)
     runs["directory"] = [str(path) for path in run_directories]
-    runs = runs.sort_values(list(RUN_KEYS[1:])).reset_index(drop=True)
+    runs["reward"] = [config.get("reward") for config in configs]
+    runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
     tables = {
         name: _stacked(run_directories, summaries, f"{name}.parquet")
         for name in ("episodes", "failures", "loitering")
     }
     if classifier is None:
-        return Results(directory, runs, unfinished=unfinished, **tables)
+        plugins = [
+            recorded_classifier(config, path / "config.json")
+            for config, path in zip(configs, run_directories, strict=True)
+        ]
+        recorded = MechanismClassifier() if all(p is None for p in plugins) else None
+        return Results(directory, runs, unfinished=unfinished, classifier=recorded, **tables)
     tables["failures"] = _reclassified(tables["failures"], runs, classifier)
     return Results(directory, runs, unfinished=unfinished, classifier=classifier, **tables)
 
@@ -126,6 +146,16 @@ def _reclassified(
         )
         relabelled.loc[group.index, "class"] = [classes[i] for i in summaries]
     return relabelled
+
+
+def recorded_classifier(config: dict[str, Any], path: Path) -> PluginSpec | None:
+    """The failure classifier plug-in a run recorded in ``config``, its ``config.json`` at
+    ``path``, as data (None: the built-in classifier). Nothing is imported."""
+    spec = config.get("run", {}).get("classifier")
+    try:
+        return None if spec is None else PluginSpec.model_validate(spec)
+    except ValidationError as error:
+        raise ResultsError(f"{path}: run.{format_validation_error(error)}") from None
 
 
 def _campaign_runs(directory: Path) -> tuple[list[Path], list[str]]:
@@ -168,3 +198,17 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ResultsError(f"{path}: expected a JSON object")
     return data
+
+
+def in_tester_order(
+    table: pd.DataFrame, keys: Sequence[str] = (), then: Sequence[str] = ()
+) -> pd.DataFrame:
+    """``table`` sorted by ``keys``, then by tester, then by ``then``: registered testers in the
+    registry's order, the others (plug-ins) after them by name."""
+    rank = {name: i for i, name in enumerate(sort_testers(table["tester"]))}
+
+    def sort_key(column: pd.Series) -> pd.Series:
+        return column.map(rank) if column.name == "tester" else column
+
+    ordered = table.sort_values([*keys, "tester", *then], key=sort_key, kind="stable")
+    return ordered.reset_index(drop=True)

@@ -9,6 +9,13 @@ from __future__ import annotations
 STUDY_EPISODES = 20_000
 """Episodes per run in the study."""
 
+STUDY_BASELINE = "random"
+"""The tester the study compared the others with (Lessons 1 and 2)."""
+
+STUDY_REWARDS = ("ppo-acc", "ppo-max")
+"""The two testers whose runtimes Table II compares: PPO with the accumulated reward and PPO
+with the maximum reward."""
+
 STUDY_CLASSES: dict[tuple[str, str], dict[str, tuple[int, int]]] = {
     ("crossing", "none"): {"ppo-max": (8, 8), "ppo-acc": (8, 8), "random": (8, 8)},
     ("crossing", "1.25m"): {"ppo-max": (6, 9), "ppo-acc": (7, 9), "random": (5, 9)},

@@ -12,17 +12,17 @@ import numpy as np
 import pandas as pd
 from scipy.stats import binomtest
 
-from hazardhunt.analysis.results import Results
+from hazardhunt.analysis.results import Results, in_tester_order
 from hazardhunt.analysis.study import (
+    STUDY_BASELINE,
     STUDY_CLASSES,
     STUDY_EPISODES,
     STUDY_LESSON_1,
+    STUDY_REWARDS,
     STUDY_RUNTIME_MINUTES,
 )
 from hazardhunt.spec.failure_classes import OTHER
-
-BASELINE = "random"
-"""The tester the others are compared with (Lesson 1)."""
+from hazardhunt.testers.registry import sort_testers
 
 
 def failures_per_run(runs: pd.DataFrame) -> pd.DataFrame:
@@ -30,24 +30,30 @@ def failures_per_run(runs: pd.DataFrame) -> pd.DataFrame:
     grouped = runs.groupby(["field", "scenario", "tester"], sort=True)["failures"]
     table = grouped.agg(["mean", "std", "min", "max", "count"]).reset_index()
     table["std"] = table["std"].fillna(0.0)
-    return table.rename(columns={"count": "seeds"})
+    return in_tester_order(table.rename(columns={"count": "seeds"}), ("field", "scenario"))
 
 
 def class_coverage(results: Results) -> pd.DataFrame:
     """Table I: the distinct classes found over all seeds, ``k / K``, beside the study's.
 
-    ``other`` is listed but not counted in k; K is the number of named classes.
+    ``other`` is listed but not counted in k; K is the number of named classes (as the runs
+    recorded it when the results' classifier is not known).
     """
     rows = []
-    for (scenario, field, tester), _ in results.runs.groupby(["scenario", "field", "tester"]):
-        named = results.classes_for(field, scenario)[:-1]
-        failures = results.failures
+    failures = results.failures
+    for (scenario, field, tester), runs in results.runs.groupby(["scenario", "field", "tester"]):
         mask = (
             (failures["scenario"] == scenario)
             & (failures["field"] == field)
             & (failures["tester"] == tester)
         )
         found = set(failures.loc[mask, "class"]) if "class" in failures else set()
+        classes = results.classes_for(field, scenario)
+        if classes is None:
+            total = int(runs["classes_total"].max())
+            classes = (*sorted(found - {OTHER}), OTHER)
+        else:
+            total = len(classes) - 1
         study = STUDY_CLASSES.get((scenario, field), {}).get(tester)
         rows.append(
             {
@@ -55,32 +61,32 @@ def class_coverage(results: Results) -> pd.DataFrame:
                 "field": field,
                 "tester": tester,
                 "found": len(found - {OTHER}),
-                "total": len(named),
-                "k / K": f"{len(found - {OTHER})} / {len(named)}",
+                "total": total,
+                "k / K": f"{len(found - {OTHER})} / {total}",
                 "study k / K": f"{study[0]} / {study[1]}" if study else "",
-                "classes": ", ".join(name for name in (*named, OTHER) if name in found),
+                "classes": ", ".join(name for name in classes if name in found),
             }
         )
-    return pd.DataFrame(rows)
+    return in_tester_order(pd.DataFrame(rows), ("scenario", "field"))
 
 
 def lesson_2(coverage: pd.DataFrame) -> pd.DataFrame:
     """Lesson 2: in how many (scenario, field) cases each tester found more, as many or fewer
-    distinct classes than random sampling (from ``class_coverage``), beside the same count
-    over the study's Table I."""
+    distinct classes than the baseline, random sampling (from ``class_coverage``), beside the
+    same count over the study's Table I."""
     rows = []
     for tester, (more, same, fewer, cases) in _against_baseline(
         coverage, ["scenario", "field"], "found"
     ):
         study = [
-            (found[tester][0], found[BASELINE][0])
+            (found[tester][0], found[STUDY_BASELINE][0])
             for found in STUDY_CLASSES.values()
             if tester in found
         ]
         rows.append(
             {
                 "tester": tester,
-                "more classes than random": more,
+                f"more classes than {STUDY_BASELINE}": more,
                 "as many": same,
                 "fewer": fewer,
                 "cases": cases,
@@ -102,40 +108,43 @@ def failures_per_class(failures: pd.DataFrame) -> pd.DataFrame:
     counts = failures.pivot_table(
         index="class", columns="tester", values="episode", aggfunc="count", fill_value=0
     )
+    counts = counts[sort_testers(counts.columns)]
     return counts.reset_index().rename_axis(columns=None)
 
 
 def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
-    """Table II: mean wall time per run of ``ppo-acc`` and ``ppo-max`` and the speedup.
+    """Table II: mean wall time per run of the accumulated-reward and the maximum-reward tester
+    (``STUDY_REWARDS``: ppo-acc and ppo-max) and the speedup.
 
     The speedup is the study's: 1 - max / acc. Beside the measured means are the same runs
     scaled to the study's 20,000 episodes, and the study's own runtimes.
     """
+    acc, most = STUDY_REWARDS
     rows = []
-    rl = runs[runs["tester"].isin(["ppo-acc", "ppo-max"])]
+    rl = runs[runs["tester"].isin([acc, most])]
     for (scenario, field), group in rl.groupby(["scenario", "field"], sort=True):
         means = group.groupby("tester")["wall_time_s"].mean()
         per_episode = (group["wall_time_s"] / group["episodes"]).groupby(group["tester"]).mean()
-        if not {"ppo-acc", "ppo-max"} <= set(means.index):
+        if not {acc, most} <= set(means.index):
             continue
         study = STUDY_RUNTIME_MINUTES.get((scenario, field))
         row: dict[str, Any] = {
             "scenario": scenario,
             "field": field,
-            "ppo-acc (s)": means["ppo-acc"],
-            "ppo-max (s)": means["ppo-max"],
-            "speedup": 1.0 - means["ppo-max"] / means["ppo-acc"],
-            "ppo-acc per 20k (h:mm)": _hours_minutes(per_episode["ppo-acc"] * STUDY_EPISODES),
-            "ppo-max per 20k (h:mm)": _hours_minutes(per_episode["ppo-max"] * STUDY_EPISODES),
+            f"{acc} (s)": means[acc],
+            f"{most} (s)": means[most],
+            "speedup": 1.0 - means[most] / means[acc],
+            f"{acc} per 20k (h:mm)": _hours_minutes(per_episode[acc] * STUDY_EPISODES),
+            f"{most} per 20k (h:mm)": _hours_minutes(per_episode[most] * STUDY_EPISODES),
         }
         if study:
             row |= {
-                "study ppo-acc (h:mm)": _hours_minutes(study["ppo-acc"] * 60.0),
-                "study ppo-max (h:mm)": _hours_minutes(study["ppo-max"] * 60.0),
-                "study speedup": 1.0 - study["ppo-max"] / study["ppo-acc"],
-                "faster than the study (ppo-max)": study["ppo-max"]
+                f"study {acc} (h:mm)": _hours_minutes(study[acc] * 60.0),
+                f"study {most} (h:mm)": _hours_minutes(study[most] * 60.0),
+                "study speedup": 1.0 - study[most] / study[acc],
+                f"faster than the study ({most})": study[most]
                 * 60.0
-                / (per_episode["ppo-max"] * STUDY_EPISODES),
+                / (per_episode[most] * STUDY_EPISODES),
             }
         rows.append(row)
     return pd.DataFrame(rows)
@@ -143,7 +152,7 @@ def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
 
 def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
     """Lesson 1: in how many (scenario, field, seed) comparisons each tester found more
-    failures than random sampling, beside the study's counts."""
+    failures than the baseline, random sampling, beside the study's counts."""
     rows = []
     for tester, (more, same, fewer, comparisons) in _against_baseline(
         runs, ["scenario", "field", "seed"], "failures"
@@ -152,7 +161,7 @@ def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
         rows.append(
             {
                 "tester": tester,
-                "more failures than random": more,
+                f"more failures than {STUDY_BASELINE}": more,
                 "ties": same,
                 "fewer": fewer,
                 "comparisons": comparisons,
@@ -165,11 +174,15 @@ def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
 def _against_baseline(
     table: pd.DataFrame, keys: list[str], value: str
 ) -> list[tuple[str, tuple[int, int, int, int]]]:
-    """Per tester but the baseline, sorted: in how many cases (rows with the same ``keys`` as a
-    baseline row) its ``value`` is larger, equal or smaller than the baseline's, and the cases."""
-    baseline = table[table["tester"] == BASELINE].set_index(keys)[value].rename("baseline")
+    """Per tester but the baseline, in tester order: in how many cases (rows with the same
+    ``keys`` as a baseline row) its ``value`` is larger, equal or smaller than the baseline's,
+    and the cases."""
+    baseline = table[table["tester"] == STUDY_BASELINE].set_index(keys)[value].rename("baseline")
     counts = []
-    for tester, group in table[table["tester"] != BASELINE].groupby("tester", sort=True):
+    for tester in sort_testers(table["tester"]):
+        if tester == STUDY_BASELINE:
+            continue
+        group = table[table["tester"] == tester]
         paired = group.set_index(keys)[value].to_frame("own").join(baseline, how="inner")
         own, other = paired["own"], paired["baseline"]
         counts.append(
@@ -191,7 +204,8 @@ def reward_hacking(episodes: pd.DataFrame) -> pd.DataFrame:
     episode, the share of stalls and timeouts, the risk summed over episodes without a failure
     (what the accumulated reward pays), and the episodes flagged as loitering."""
     rows = []
-    for tester, group in episodes.groupby("tester", sort=True):
+    for tester in sort_testers(episodes["tester"]):
+        group = episodes[episodes["tester"] == tester]
         no_failure = group[group["outcome"] != "failure"]
         loitering = group["loitering"] if "loitering" in group else pd.Series(False, group.index)
         rows.append(
@@ -232,7 +246,7 @@ def failure_rates(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     table["rate"] = table["failures"] / table["episodes"]
     table["low"] = [low for low, _ in bounds]
     table["high"] = [high for _, high in bounds]
-    return table
+    return in_tester_order(table, ("scenario", "field"))
 
 
 def learning_curves(episodes: pd.DataFrame, bins: int = 20) -> pd.DataFrame:
@@ -249,7 +263,7 @@ def learning_curves(episodes: pd.DataFrame, bins: int = 20) -> pd.DataFrame:
     curves = per_run.groupby(["tester", "field", "slice"]).mean().reset_index()
     curves["episode"] = (curves["slice"] + 1) * width
     curves["failures per 100 episodes"] = 100.0 * curves["failed"]
-    return curves[["tester", "field", "episode", "failures per 100 episodes"]]
+    return in_tester_order(curves[["tester", "field", "episode", "failures per 100 episodes"]])
 
 
 def representatives(failures: pd.DataFrame) -> pd.DataFrame:

@@ -73,15 +73,13 @@ PROGRESS_INTERVAL_S = 0.5
 _PR_SET_PDEATHSIG = 1
 
 
-class CampaignFailed(SystemExit):
-    """Some runs raised while the others completed; ``summary`` records which and why.
-
-    A ``SystemExit`` (code 1) so that the ``hazardhunt campaign`` command ends non-zero after its
-    report without a traceback; library callers catch it to read ``summary``.
-    """
+class CampaignFailed(Exception):  # noqa: N818 - names an outcome, as the command reports it
+    """Some runs raised while the others completed; ``summary`` records which and why."""
 
     def __init__(self, summary: dict[str, Any]) -> None:
-        super().__init__(1)
+        super().__init__(
+            f"{summary['runs_failed']} of {summary['runs_total']} runs raised (see summary.json)"
+        )
         self.summary = summary
 
 

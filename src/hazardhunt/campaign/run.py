@@ -33,15 +33,22 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import ConfigError, EnvOptions, PluginSpec, RunConfig
+from hazardhunt.campaign.config import ConfigError, EnvOptions, RunConfig
+from hazardhunt.campaign.plugins import (
+    PluginSpec,
+    make_classifier,
+    make_controller,
+    make_plugin_tester,
+    make_safety_layer,
+)
 from hazardhunt.campaign.store import RunStore, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.spec.failure_classes import OTHER, MechanismClassifier
+from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
-from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, tester_reward
+from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
 from hazardhunt.world.scenario import Scenario
 
 
@@ -70,19 +77,13 @@ def build_simulation(
     Raises:
         PluginError: A plug-in does not load.
     """
-    from hazardhunt.sut.plugins import build_controller, build_safety_layer
-
     return Simulation.build(
         scenario,
         field,
         options.decision_period,
         solver=options.solver,
-        controller=None
-        if controller is None
-        else build_controller(controller.path, controller.params, controller.search_path),
-        safety_layer=None
-        if safety_layer is None
-        else build_safety_layer(safety_layer.path, safety_layer.params, safety_layer.search_path),
+        controller=None if controller is None else make_controller(controller),
+        safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
         termination=TerminationParams(options.episode_duration, options.stall_duration),
         robot=options.robot,
     )
@@ -95,6 +96,17 @@ def simulation_of(config: RunConfig) -> Simulation:
     )
 
 
+def make_run_tester(config: RunConfig) -> Tester:
+    """The tester a run's configuration names: a registered one, or a user's plug-in.
+
+    Raises:
+        PluginError: A plug-in does not load.
+    """
+    if config.tester_plugin is None:
+        return make_tester(config.tester, config.seed, config.tester_params)
+    return make_plugin_tester(config.tester_plugin, config.seed)
+
+
 def record_run(
     config: RunConfig, directory: Path, progress: ProgressCallback | None = None
 ) -> dict[str, Any]:
@@ -105,15 +117,15 @@ def record_run(
     """
     directory.mkdir(parents=True)
     started_at = datetime.now(timezone.utc).isoformat()
-    tester = make_tester(config.tester, config.seed, config.tester_params)
+    tester = make_run_tester(config)
     simulation = simulation_of(config)
-    classifier = MechanismClassifier(robot=simulation.robot_params)
+    classifier = make_classifier(config.classifier, simulation.robot_params)
     write_json_atomic(
         directory / "config.json",
         {
             "run": config.model_dump(),
             "run_id": config.run_id,
-            "reward": tester_reward(tester),
+            "reward": reward_of(tester),
             "hazardhunt_version": hazardhunt.__version__,
             "source_digest": hazardhunt.source_digest(),
             "python": platform.python_version(),
@@ -138,7 +150,7 @@ def record_run(
             elapsed = time.perf_counter() - clock
             progress(RunProgress(record.episode + 1, config.episodes, store.failure_count, elapsed))
 
-    recorder = EpisodeRecorder(AGVEnv.wrapping(simulation, tester_reward(tester)), on_episode)
+    recorder = EpisodeRecorder(AGVEnv.wrapping(simulation, reward_of(tester)), on_episode)
     tester.explore(recorder, config.episodes)
     tester.save(directory / "tester")
     store.close()

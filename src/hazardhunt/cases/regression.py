@@ -3,13 +3,17 @@
 A case is one TOML file that needs nothing else: the scenario (with its map inlined), the
 field setting, the environment's options, the SUT's configuration (the built-in NMPC or a
 plug-in's import path and parameters), the human's action sequence, the seed, and the outcome
-the run observed with its failure class. Re-running a case plays the same actions against
-today's SUT (or one given instead) and compares:
+the run observed with its failure class (and the failure classifier, when not the built-in
+one). Re-running a case plays the same actions against today's SUT (or one given instead) and
+compares:
 
 - ``still fails``: a failure of the same class;
 - ``changed``: a failure of another class, or the SUT erred (``sut_error``): it fails
   differently;
 - ``fixed``: neither.
+
+A failure classifier plug-in that a case names is not imported from the file: re-running such
+a case needs the classifier named again (``regress --classifier``).
 """
 
 from __future__ import annotations
@@ -27,10 +31,10 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import EnvOptions, PluginSpec
+from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
-from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.world.scenario import (
     ScenarioError,
@@ -114,6 +118,9 @@ class _Case(_CaseTable):
     found: dict[str, Any] = {}
     """Where the failure was found, for people; regress does not read it."""
     sut: _CaseSut = _CaseSut()
+    classifier: _CasePlugin | None = None
+    """The failure-classifier plug-in that named the expected class (None: the built-in
+    one); regress never imports it from the file."""
     human: _CaseHuman
     scenario: dict[str, Any]
     """A scenario file's contents with its map inlined (checked by ``scenario_from_data``)."""
@@ -135,7 +142,13 @@ class RegressionResult:
     """One of ``VERDICTS``."""
 
 
-def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> list[Path]:
+def export_cases(
+    directory: Path,
+    out: Path,
+    *,
+    every_failure: bool = False,
+    classifier: PluginSpec | None = None,
+) -> list[Path]:
     """Write regression cases for the failures of a run or campaign directory into ``out``.
 
     Args:
@@ -144,11 +157,17 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
         every_failure: One case per failure, instead of one per failure class for each
             scenario and field setting (the class's representative: the failure whose time to
             contact is the class's median).
+        classifier: Classify every failure anew with this failure classifier plug-in; without
+            one, the classes the runs recorded count, and each case names the classifier its
+            run recorded (read as data, not imported).
 
     Returns:
         The case files written, in a stable order.
+
+    Raises:
+        PluginError: ``classifier`` does not load.
     """
-    results = load_results(directory)
+    results = load_results(directory, None if classifier is None else make_classifier(classifier))
     failures = results.failures
     if every_failure or failures.empty:
         chosen = failures
@@ -162,7 +181,7 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
         run_id = str(row["run_id"])
         if run_id not in configs:
             configs[run_id] = load_run_config(results.run_directory(run_id))
-        case = _case(row, configs[run_id])
+        case = _case(row, configs[run_id], classifier or configs[run_id].classifier)
         path = out / f"{case['name']}.toml"
         header = (
             f"# A failure hazardhunt found, as a regression case: {case['expected']['class']}\n"
@@ -173,15 +192,16 @@ def export_cases(directory: Path, out: Path, *, every_failure: bool = False) -> 
     return written
 
 
-def _case(row: pd.Series, config: Any) -> dict[str, Any]:
-    """The contents of one case file."""
+def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[str, Any]:
+    """The contents of one case file, its class given by ``classifier`` (None: the built-in
+    one)."""
     failure_class = str(row.get("class", "other"))
     name = f"{row['run_id']}__episode{int(row['episode'])}"
     sut: dict[str, Any] = {}
     for key in ("controller", "safety_layer"):
         spec: PluginSpec | None = getattr(config, key)
         if spec is not None:
-            sut[key] = {"path": spec.path, "params": dict(spec.params)}
+            sut[key] = _plugin_table(spec)
     actions = np.asarray(list(row["actions"]), dtype=np.float32).reshape(-1, 2)
     return {
         "format": CASE_FORMAT,
@@ -207,10 +227,16 @@ def _case(row: pd.Series, config: Any) -> dict[str, Any]:
             "episode": int(row["episode"]),
             "hazardhunt_version": hazardhunt.__version__,
         },
+        **({} if classifier is None else {"classifier": _plugin_table(classifier)}),
         "sut": sut,
         "human": {"actions": [[float(a), float(b)] for a, b in actions]},
         "scenario": scenario_data(config.scenario),
     }
+
+
+def _plugin_table(spec: PluginSpec) -> dict[str, Any]:
+    """A plug-in as a case names it: where to find it is the reader's business."""
+    return {"path": spec.path, "params": dict(spec.params)}
 
 
 PYTEST_MODULE = '''"""hazardhunt's regression cases in this folder as tests: each passes once the
@@ -221,24 +247,37 @@ from pathlib import Path
 import pytest
 
 from hazardhunt.cases import case_files, regress_case
-
+{classifier_import}
 CASES = case_files(Path(__file__).parent)
+CLASSIFIER = {classifier}
 
 
 @pytest.mark.parametrize("case", CASES, ids=[case.stem for case in CASES])
 def test_the_sut_no_longer_fails(case):
-    result = regress_case(case)
+    result = regress_case(case, classifier=CLASSIFIER)
     assert result.verdict == "fixed", (
-        f"{case.name}: {result.verdict} ({result.failure_class} at {result.sim_time:.2f} s)"
+        f"{{case.name}}: {{result.verdict}} ({{result.failure_class}} at {{result.sim_time:.2f}} s)"
     )
 '''
 """The test module ``hazardhunt export --pytest`` writes next to the cases."""
 
 
-def write_pytest_module(out: Path) -> Path:
-    """Write ``test_hazardhunt_cases.py`` into the cases folder ``out``."""
+def write_pytest_module(out: Path, classifier: PluginSpec | None = None) -> Path:
+    """Write ``test_hazardhunt_cases.py`` into the cases folder ``out``; its tests classify
+    failures with ``classifier`` (found next to the module or in the working directory), or
+    with the built-in classifier."""
+    if classifier is None:
+        source = PYTEST_MODULE.format(classifier_import="", classifier="None")
+    else:
+        source = PYTEST_MODULE.format(
+            classifier_import="from hazardhunt.campaign.plugins import PluginSpec\n",
+            classifier=(
+                f"PluginSpec(\n    path={classifier.path!r},\n    params={classifier.params!r},\n"
+                "    search_path=[str(Path(__file__).parent), str(Path.cwd())],\n)"
+            ),
+        )
     path = out / "test_hazardhunt_cases.py"
-    path.write_text(PYTEST_MODULE, encoding="utf-8")
+    path.write_text(source, encoding="utf-8")
     return path
 
 
@@ -260,14 +299,27 @@ def regress_case(
     controller: PluginSpec | None = None,
     safety_layer: PluginSpec | None = None,
     field: str | None = None,
+    classifier: PluginSpec | None = None,
 ) -> RegressionResult:
     """Re-run one case, against the given plug-ins and field setting instead of the case's.
 
+    The replayed failure is classified by ``classifier``, else by the built-in classifier. A
+    case whose class came from a classifier plug-in needs it given as ``classifier``: an import
+    path read from the case file is not imported.
+
     Raises:
-        CaseError: The file is not a valid case.
+        CaseError: The file is not a valid case, or it names a classifier plug-in that is not
+            given.
         PluginError: A plug-in does not load.
     """
     case = _read_case(path)
+    if classifier is None and case.classifier is not None:
+        raise CaseError(
+            f"{path}: classifier: the case was classified by the plug-in "
+            f"{case.classifier.path!r}, which is not imported from a file; name it to re-run "
+            "the case (regress --classifier)"
+        )
+    own_classifier = None if classifier is None else make_classifier(classifier)
     try:
         scenario = scenario_from_data(case.scenario, f"{path} [scenario]")
     except ScenarioError as error:
@@ -293,9 +345,8 @@ def regress_case(
     outcome = result.outcome or "unfinished"
     failure_class = None
     if outcome == "failure":
-        failure_class = MechanismClassifier(robot=simulation.robot_params).classify(
-            result.trajectory or (), result.summary, simulation.field
-        )
+        chosen = own_classifier or make_classifier(None, simulation.robot_params)
+        failure_class = chosen.classify(result.trajectory or (), result.summary, simulation.field)
     expected = case.expected.failure_class
     if failure_class == expected:
         verdict = "still fails"

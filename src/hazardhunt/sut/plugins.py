@@ -1,11 +1,15 @@
-"""A user's controller or safety layer, loaded by import path (``package.module:Class``).
+"""Plug-ins loaded by import path (``package.module:Class``), and the SUT's two: a controller and a
+safety layer.
 
-The object named by the path is called with the keyword parameters of the run (a class, or any
-factory function) and what it returns must satisfy the :class:`~hazardhunt.sut.protocols.
-Controller` or :class:`~hazardhunt.sut.protocols.SafetyLayer` protocol. Every problem (a module
-that does not import, a missing attribute, parameters the class does not take, an object that
-lacks a method) is a :class:`PluginError` that names the path and what is wrong, raised when the
-run or campaign is configured rather than in the middle of a campaign.
+The object named by the path is called with keyword parameters (a class, or any factory function)
+and what it returns must satisfy a runtime-checkable protocol. :func:`build` does this for any
+plug-in point; the caller names the protocol, so that the testers and the failure classifiers,
+which live above the SUT, load through the same code. Every problem (a module that does not
+import, a missing attribute, parameters the class does not take, an object that lacks a member)
+is a :class:`PluginError` that names the path and what is wrong.
+
+Loading a plug-in leaves ``sys.path`` as it was: the directories it may be found in are on it only
+while its module is imported.
 """
 
 from __future__ import annotations
@@ -13,8 +17,10 @@ from __future__ import annotations
 import importlib
 import inspect
 import math
+import pkgutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from hazardhunt.sut.protocols import Controller, SafetyLayer
@@ -22,13 +28,6 @@ from hazardhunt.sut.protocols import Controller, SafetyLayer
 
 class PluginError(ValueError):
     """A plug-in that cannot be loaded or does not fit its protocol."""
-
-
-REQUIRED = {
-    "controller": (Controller, ("control_period", "reset", "control")),
-    "safety layer": (SafetyLayer, ("reset", "update")),
-}
-"""Per plug-in kind its protocol and the members the protocol asks for."""
 
 
 def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
@@ -44,38 +43,58 @@ def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
     module_name, separator, attribute = path.partition(":")
     if not separator or not module_name or not attribute:
         raise PluginError(f"{path!r} is not an import path of the form 'package.module:Name'")
-    for directory in reversed(search_path):
-        if directory not in sys.path:
-            sys.path.insert(0, directory)
+    with _importable_from(search_path):
+        try:
+            return pkgutil.resolve_name(path)
+        except ImportError as error:
+            raise PluginError(f"{path!r}: cannot import module {module_name!r}: {error}") from None
+        except AttributeError as error:
+            if module_name in sys.modules:  # the module imported; the name is missing
+                raise PluginError(
+                    f"{path!r}: module {module_name!r} has no attribute {attribute!r}"
+                ) from None
+            raise _import_raised(path, module_name, error) from error
+        except Exception as error:  # the module itself raised while importing
+            raise _import_raised(path, module_name, error) from error
+
+
+def _import_raised(path: str, module_name: str, error: Exception) -> PluginError:
+    return PluginError(
+        f"{path!r}: importing module {module_name!r} raised {type(error).__name__}: {error}"
+    )
+
+
+@contextmanager
+def _importable_from(directories: Sequence[str]) -> Iterator[None]:
+    """Put ``directories`` first on ``sys.path`` for the duration, then restore it exactly."""
+    saved = list(sys.path)
+    sys.path[:0] = directories
+    importlib.invalidate_caches()  # a module written since the last import is found
     try:
-        module = importlib.import_module(module_name)
-    except ImportError as error:
-        raise PluginError(f"{path!r}: cannot import module {module_name!r}: {error}") from None
-    except Exception as error:  # the module itself raised while importing
-        raise PluginError(
-            f"{path!r}: importing module {module_name!r} raised {type(error).__name__}: {error}"
-        ) from error
-    target: Any = module
-    for part in attribute.split("."):
-        if not hasattr(target, part):
-            raise PluginError(f"{path!r}: module {module_name!r} has no attribute {attribute!r}")
-        target = getattr(target, part)
-    return target
+        yield
+    finally:
+        sys.path[:] = saved
 
 
-def build(kind: str, path: str, params: dict[str, Any], search_path: Sequence[str] = ()) -> Any:
-    """Load ``path``, call it with ``params`` and check the result against ``kind``'s protocol.
+def build(
+    kind: str,
+    path: str,
+    params: Mapping[str, Any],
+    protocol: type,
+    search_path: Sequence[str] = (),
+) -> Any:
+    """Load ``path``, call it with ``params`` and check the result against ``protocol``.
 
     Args:
-        kind: ``"controller"`` or ``"safety layer"``.
+        kind: What the plug-in is, for messages (``"controller"``, ``"tester"``, ...).
         path: The import path of a class or factory.
         params: Its keyword parameters.
+        protocol: A runtime-checkable ``typing.Protocol`` the result must satisfy.
         search_path: Directories to import from (see :func:`load_attribute`).
 
     Raises:
         PluginError: Naming the path and what is wrong.
     """
-    protocol, members = REQUIRED[kind]
     factory = load_attribute(path, search_path)
     if not callable(factory):
         raise PluginError(f"{path!r} is a {type(factory).__name__}, not a class or factory")
@@ -91,45 +110,66 @@ def build(kind: str, path: str, params: dict[str, Any], search_path: Sequence[st
         raise PluginError(
             f"{path!r}: building the {kind} raised {type(error).__name__}: {error}"
         ) from error
-    # A runtime-checkable protocol checks exactly this: every member is present.
-    missing = [name for name in members if not hasattr(plugin, name)]
-    if missing:
-        raise PluginError(
-            f"{path!r} does not satisfy the {protocol.__name__} protocol: it lacks "
-            f"{', '.join(missing)} (see docs/plugins.md)"
-        )
-    not_callable = [
-        name for name in members if name != "control_period" and not callable(getattr(plugin, name))
-    ]
-    if not_callable:
-        raise PluginError(
-            f"{path!r} does not satisfy the {protocol.__name__} protocol: "
-            f"{', '.join(not_callable)} must be methods"
-        )
-    if kind == "controller":
-        period = getattr(plugin, "control_period", None)
-        if (
-            isinstance(period, bool)
-            or not isinstance(period, (int, float))
-            or not (math.isfinite(period) and period > 0)
-        ):
-            raise PluginError(
-                f"{path!r}: control_period must be a positive number of seconds, not {period!r}"
-            )
+    check_protocol(path, plugin, protocol)
     return plugin
 
 
+def check_protocol(path: str, plugin: object, protocol: type) -> None:
+    """Raises PluginError, naming what ``plugin`` (built from ``path``) lacks, unless it is an
+    instance of the runtime-checkable ``protocol`` whose methods are all callable."""
+    members = protocol_members(protocol)
+    methods = [name for name, is_method in members.items() if is_method]
+    not_methods = [name for name in methods if not callable(getattr(plugin, name, None))]
+    if isinstance(plugin, protocol) and not not_methods:
+        return
+    missing = [name for name in members if not hasattr(plugin, name)]
+    if missing:
+        problem = f"it lacks {', '.join(missing)}"
+    elif not_methods:
+        problem = f"{', '.join(not_methods)} must be methods"
+    else:
+        problem = "isinstance() says no"
+    raise PluginError(
+        f"{path!r} does not satisfy the {protocol.__name__} protocol: {problem} "
+        "(see docs/plugins.md)"
+    )
+
+
+def protocol_members(protocol: type) -> dict[str, bool]:
+    """The public members a protocol declares, in declaration order, each with whether it is a
+    method (rather than an attribute or a property)."""
+    members: dict[str, bool] = {}
+    for cls in reversed(protocol.__mro__):
+        if not vars(cls).get("_is_protocol", False):
+            continue
+        for name in getattr(cls, "__annotations__", {}):
+            members.setdefault(name, False)
+        for name, value in vars(cls).items():
+            if not name.startswith("_"):
+                members[name] = callable(value)
+    return members
+
+
 def build_controller(
-    path: str, params: dict[str, Any] | None = None, search_path: Sequence[str] = ()
+    path: str, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
 ) -> Controller:
-    """A user's controller (see :func:`build`)."""
-    controller: Controller = build("controller", path, dict(params or {}), search_path)
+    """A user's controller (see :func:`build`), whose ``control_period`` is a positive number."""
+    controller: Controller = build("controller", path, params or {}, Controller, search_path)
+    period = controller.control_period
+    if (
+        isinstance(period, bool)
+        or not isinstance(period, (int, float))
+        or not (math.isfinite(period) and period > 0)
+    ):
+        raise PluginError(
+            f"{path!r}: control_period must be a positive number of seconds, not {period!r}"
+        )
     return controller
 
 
 def build_safety_layer(
-    path: str, params: dict[str, Any] | None = None, search_path: Sequence[str] = ()
+    path: str, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
 ) -> SafetyLayer:
     """A user's safety layer (see :func:`build`)."""
-    layer: SafetyLayer = build("safety layer", path, dict(params or {}), search_path)
+    layer: SafetyLayer = build("safety layer", path, params or {}, SafetyLayer, search_path)
     return layer

@@ -120,7 +120,7 @@ class Tester(Protocol):
         ...
 
 
-def tester_reward(tester: Tester) -> RewardKind:
+def reward_of(tester: Tester) -> RewardKind:
     """The reward the env gives ``tester``: its own ``reward``, else the maximum reward."""
     reward: RewardKind = getattr(tester, "reward", "max")
     return reward

@@ -1,0 +1,158 @@
+"""The testers hazardhunt knows by name, and testers of one's own loaded by import path.
+
+Every built-in tester registers here with what the rest of hazardhunt needs to know about it: how
+to build one, the reward it learns from, a line that describes it and the colour it has in every
+figure. The command line, the configuration's checks and the report read this registry rather
+than a list of names of their own.
+
+A user's tester needs no registration: it is named by import path (``package.module:Class``)
+and called as ``Class(seed=..., **params)``, like a built-in tester's factory. An import path
+works in every worker process and on every Ray node, which a registration made at run time in
+the user's own process would not reach.
+"""
+
+from __future__ import annotations
+
+import inspect
+import zlib
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.sut.plugins import PluginError, build
+from hazardhunt.testers.base import Tester
+from hazardhunt.testers.random_sampling import RandomTester
+
+TesterFactory = Callable[..., Tester]
+"""Builds a tester: called as ``factory(seed=..., **params)``."""
+
+
+@dataclass(frozen=True)
+class RegisteredTester:
+    """A tester known by name."""
+
+    name: str
+    factory: TesterFactory
+    """Called as ``factory(seed=..., **params)`` with the run's seed and tester parameters."""
+    reward: RewardKind
+    """The reward the tester learns from (``acc`` or ``max``)."""
+    description: str
+    """One line for the command line's help and the documentation."""
+    colour: str
+    """Its colour in every figure (any matplotlib colour)."""
+
+
+_REGISTRY: dict[str, RegisteredTester] = {}
+TESTERS: Mapping[str, RegisteredTester] = MappingProxyType(_REGISTRY)
+"""The registered testers by name, in the order they registered (the order of every table)."""
+
+OTHER_COLOURS = ("#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#bcbd22", "#17becf")
+"""Colours of testers that are not registered (plug-ins), chosen by name."""
+
+
+def register_tester(
+    name: str, factory: TesterFactory, *, reward: RewardKind, description: str, colour: str
+) -> RegisteredTester:
+    """Make a tester known by ``name``.
+
+    Raises:
+        ValueError: ``name`` is taken, or looks like an import path (contains ``:``).
+    """
+    if name in _REGISTRY:
+        raise ValueError(f"a tester named {name!r} is already registered")
+    if ":" in name or not name:
+        raise ValueError(f"{name!r} cannot name a tester: a name is not empty and has no ':'")
+    entry = RegisteredTester(name, factory, reward, description, colour)
+    _REGISTRY[name] = entry
+    return entry
+
+
+def make_tester(name: str, seed: int, params: Mapping[str, Any] | None = None) -> Tester:
+    """Build the registered tester ``name`` with keyword ``params``.
+
+    Raises:
+        ValueError: ``name`` is not registered, or the tester does not take ``params``.
+    """
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown tester {name!r}: use one of {', '.join(_REGISTRY)}")
+    factory = _REGISTRY[name].factory
+    params = dict(params or {})
+    if "seed" in params:
+        raise ValueError(f"tester {name!r}: parameter 'seed' is set by hazardhunt (the run's seed)")
+    try:
+        inspect.signature(factory).bind(seed=seed, **params)
+    except TypeError as error:
+        raise ValueError(f"tester {name!r} does not take these parameters: {error}") from None
+    return factory(seed=seed, **params)
+
+
+def build_tester(
+    path: str, seed: int, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
+) -> Tester:
+    """A user's tester: ``Class(seed=seed, **params)`` for the class (or factory) at import path
+    ``path``, checked against the :class:`~hazardhunt.testers.base.Tester` protocol.
+
+    Raises:
+        PluginError: Naming the path and what is wrong.
+    """
+    params = dict(params or {})
+    if "seed" in params:
+        raise PluginError(f"{path!r}: parameter 'seed' is set by hazardhunt (the run's seed)")
+    tester: Tester = build("tester", path, {"seed": seed, **params}, Tester, search_path)
+    return tester
+
+
+def is_import_path(tester: str) -> bool:
+    """Whether ``tester`` names a plug-in (``package.module:Class``) rather than a registered
+    tester."""
+    return ":" in tester
+
+
+def sort_testers(names: Iterable[str]) -> list[str]:
+    """``names`` without repeats: registered testers in registration order, then the others in
+    alphabetical order."""
+    distinct = set(names)
+    return [n for n in _REGISTRY if n in distinct] + sorted(distinct - set(_REGISTRY))
+
+
+def colour_of(name: str) -> str:
+    """The colour of a tester in figures: its registered one, else one chosen by its name."""
+    if name in _REGISTRY:
+        return _REGISTRY[name].colour
+    return OTHER_COLOURS[zlib.crc32(name.encode()) % len(OTHER_COLOURS)]
+
+
+def _ppo(name: str, reward: RewardKind) -> TesterFactory:
+    """The factory of a PPO tester; Stable-Baselines3 and torch load only when one is built."""
+
+    def factory(seed: int, **params: Any) -> Tester:
+        from hazardhunt.testers.ppo import PPOTester
+
+        return PPOTester(name, reward, seed, params)
+
+    return factory
+
+
+register_tester(
+    "random",
+    RandomTester,
+    reward="max",
+    description="uniform random actions that keep the human clear of obstacles (the baseline)",
+    colour="#7f7f7f",
+)
+register_tester(
+    "ppo-acc",
+    _ppo("ppo-acc", "acc"),
+    reward="acc",
+    description="PPO (Stable-Baselines3) learning from the risk accumulated over the episode",
+    colour="#1f77b4",
+)
+register_tester(
+    "ppo-max",
+    _ppo("ppo-max", "max"),
+    reward="max",
+    description="PPO (Stable-Baselines3) learning from the episode's maximum risk",
+    colour="#ff7f0e",
+)

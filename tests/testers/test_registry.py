@@ -1,0 +1,56 @@
+"""The tester registry: the built-in testers by name, what each is, and the order of tables."""
+
+import pytest
+
+from hazardhunt.testers import TESTERS, make_tester, register_tester
+from hazardhunt.testers.base import reward_of
+from hazardhunt.testers.random_sampling import RandomTester
+from hazardhunt.testers.registry import colour_of, sort_testers
+
+
+def test_the_built_in_testers_are_registered_with_their_reward_and_colour():
+    assert list(TESTERS) == ["random", "ppo-acc", "ppo-max"]
+    assert {name: entry.reward for name, entry in TESTERS.items()} == {
+        "random": "max",
+        "ppo-acc": "acc",
+        "ppo-max": "max",
+    }
+    colours = [entry.colour for entry in TESTERS.values()]
+    assert len(set(colours)) == len(colours)
+    assert all(entry.description for entry in TESTERS.values())
+
+
+def test_a_registered_tester_is_built_by_name_with_the_runs_seed():
+    tester = make_tester("random", 7, {"attempts": 3})
+    assert isinstance(tester, RandomTester)
+    assert (tester.name, tester.seed, tester.attempts) == ("random", 7, 3)
+    for name, entry in TESTERS.items():
+        assert reward_of(make_tester(name, 0)) == entry.reward
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "message"),
+    [
+        ("genetic", {}, "unknown tester 'genetic': use one of random, ppo-acc, ppo-max"),
+        ("random", {"attempt": 3}, "tester 'random' does not take these parameters"),
+        ("random", {"seed": 3}, "parameter 'seed' is set by hazardhunt"),
+    ],
+)
+def test_unknown_testers_and_parameters_are_clear_errors(name, params, message):
+    with pytest.raises(ValueError, match=message):
+        make_tester(name, 0, params)
+
+
+def test_a_name_is_registered_once_and_is_no_import_path():
+    with pytest.raises(ValueError, match="already registered"):
+        register_tester("random", RandomTester, reward="max", description="again", colour="k")
+    with pytest.raises(ValueError, match="cannot name a tester"):
+        register_tester("pkg:Tester", RandomTester, reward="max", description="", colour="k")
+    assert "pkg:Tester" not in TESTERS
+
+
+def test_registered_testers_come_first_in_registration_order_then_the_others_by_name():
+    names = ["mine:Greedy", "ppo-max", "random", "charge", "ppo-max"]
+    assert sort_testers(names) == ["random", "ppo-max", "charge", "mine:Greedy"]
+    assert colour_of("random") == TESTERS["random"].colour
+    assert colour_of("charge") == colour_of("charge")
