@@ -20,6 +20,25 @@ CASES = {
         "tester": "ppo-acc",
         "tester_params": SMALL_PPO,
     },
+    # Whole episodes as points: small batches, so that 24 episodes are several of them.
+    "cem": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "cem",
+        "tester_params": {"population": 8},
+    },
+    "qd": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "qd",
+        "tester_params": {"emitters": 2, "batch_size": 4},
+    },
+    "ppo-novelty": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "ppo-novelty",
+        "tester_params": SMALL_PPO,
+    },
     # Two copies of the env in worker processes, their episodes recorded as they end.
     "ppo-max-2-envs": {
         "scenario": "head-on",

@@ -9,11 +9,14 @@ from hazardhunt.testers.registry import colour_of, sort_testers
 
 
 def test_the_built_in_testers_are_registered_with_their_reward_and_colour():
-    assert list(TESTERS) == ["random", "ppo-acc", "ppo-max"]
+    assert list(TESTERS) == ["random", "ppo-acc", "ppo-max", "cem", "qd", "ppo-novelty"]
     assert {name: entry.reward for name, entry in TESTERS.items()} == {
         "random": "max",
         "ppo-acc": "acc",
         "ppo-max": "max",
+        "cem": "max",
+        "qd": "max",
+        "ppo-novelty": "max",
     }
     colours = [entry.colour for entry in TESTERS.values()]
     assert len(set(colours)) == len(colours)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -53,6 +55,8 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         self.on_episode = on_episode
         self.keep_trajectory = keep_trajectory
         self.episodes_done = 0
+        self._pool: ProcessPoolExecutor | None = None
+        self._pool_size = 0
 
     @property
     def simulation(self) -> Simulation:
@@ -87,6 +91,38 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         self.record(result)
         return result
 
+    def evaluate_batch(
+        self, sequences: Sequence[NDArray[np.floating[Any]]], workers: int = 1
+    ) -> list[EpisodeResult]:
+        """Play open-loop action sequences and record them, in order, as the run's next episodes.
+
+        Args:
+            sequences: Each up to :attr:`horizon` normalised actions.
+            workers: Worker processes that play the batch at once, each with its own copy of
+                the simulation (kept for the recorder's life); 1 plays it here. The results do
+                not depend on it: every episode is deterministic.
+        """
+        if workers <= 1 or len(sequences) <= 1:
+            return [self.evaluate(actions) for actions in sequences]
+        if self._pool is None or self._pool_size != workers:
+            self.close_pool()
+            self._pool = _episode_pool(self.simulation, self.keep_trajectory, workers)
+            self._pool_size = workers
+        results = list(self._pool.map(_play_in_worker, [np.asarray(a) for a in sequences]))
+        for result in results:
+            self.record(result)
+        return results
+
+    def close_pool(self) -> None:
+        """Stop the worker processes of :meth:`evaluate_batch`, if any."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+    def close(self) -> None:
+        self.close_pool()
+        super().close()
+
     def record(self, result: EpisodeResult) -> None:
         """Hand a finished episode to ``on_episode`` as the run's next one (also for episodes
         that copies of the env ran in worker processes)."""
@@ -118,6 +154,32 @@ class Tester(Protocol):
     def save(self, directory: Path) -> None:
         """Write whatever the tester learned (e.g. a policy checkpoint) into ``directory``."""
         ...
+
+
+# The worker's simulation: a spawned process receives it once, at start-up.
+_worker_simulation: tuple[Simulation, Callable[[EpisodeSummary], bool]] | None = None
+
+
+def _episode_pool(
+    simulation: Simulation, keep_trajectory: Callable[[EpisodeSummary], bool], workers: int
+) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_start_worker,
+        initargs=(simulation, keep_trajectory),
+    )
+
+
+def _start_worker(simulation: Simulation, keep: Callable[[EpisodeSummary], bool]) -> None:
+    global _worker_simulation
+    _worker_simulation = (simulation, keep)
+
+
+def _play_in_worker(actions: NDArray[np.floating[Any]]) -> EpisodeResult:
+    assert _worker_simulation is not None, "the worker was not started with a simulation"
+    simulation, keep = _worker_simulation
+    return simulation.simulate(actions, keep)
 
 
 def reward_of(tester: Tester) -> RewardKind:

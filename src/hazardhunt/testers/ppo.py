@@ -18,13 +18,17 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.novelty import FailureArchive
+
+NOVELTY_CAP = 1.5
+"""The largest descriptor distance the bonus pays for (the first failure's is infinite)."""
 
 RESERVED_PARAMETERS = frozenset({"policy", "env", "seed", "device", "verbose", "_init_setup_model"})
 """PPO arguments the tester sets itself: the run owns the env and the seed, and SPEC fixes
@@ -35,6 +39,10 @@ TESTER_PARAMETERS = {
     "n_envs": "copies of the environment stepped at once, each in its own worker process "
     "(SB3's SubprocVecEnv); PPO collects n_steps decisions from each before it updates "
     "(default 1: one env in the run's process)",
+    "novelty": "weight of the dissimilarity bonus: an episode that ends in a failure earns "
+    "novelty x its mean descriptor distance to the k nearest failures found before it "
+    "(capped at NOVELTY_CAP; default 0: no bonus; ppo-novelty: 100)",
+    "novelty_neighbours": "the k of the bonus (default 3)",
 }
 """Parameters of the tester itself, next to PPO's own."""
 
@@ -82,6 +90,15 @@ class PPOTester:
         n_envs = params.pop("n_envs", 1)
         if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
             raise ValueError(f"tester {name!r}: n_envs must be a whole number >= 1, not {n_envs!r}")
+        novelty = params.pop("novelty", 0.0)
+        neighbours = params.pop("novelty_neighbours", 3)
+        if isinstance(novelty, bool) or not isinstance(novelty, (int, float)) or novelty < 0:
+            raise ValueError(f"tester {name!r}: novelty must be a number >= 0, not {novelty!r}")
+        if isinstance(neighbours, bool) or not isinstance(neighbours, int) or neighbours < 1:
+            raise ValueError(
+                f"tester {name!r}: novelty_neighbours must be a whole number >= 1, "
+                f"not {neighbours!r}"
+            )
         defaults = ppo_defaults()
         for key in params:
             if key in RESERVED_PARAMETERS:
@@ -100,6 +117,8 @@ class PPOTester:
         self.seed = seed
         self.params = params
         self.n_envs = n_envs
+        self.novelty = float(novelty)
+        self.novelty_neighbours = neighbours
         self.hyperparameters = defaults | params
         """The effective PPO arguments (defaults overridden by ``params``)."""
         self.model: PPO | None = None
@@ -117,6 +136,10 @@ class PPOTester:
         learning_env: gym.Env[Any, Any] | VecEnv = env
         if self.n_envs > 1:
             learning_env = RecordingVecEnv(env, self.n_envs, episodes)
+        if self.novelty > 0:
+            if not isinstance(learning_env, VecEnv):
+                learning_env = DummyVecEnv([lambda: env])
+            learning_env = NoveltyBonus(learning_env, self.novelty, self.novelty_neighbours)
         try:
             self.model = PPO(
                 "MlpPolicy",
@@ -158,6 +181,8 @@ class PPOTester:
             "seed": self.seed,
             "device": "cpu",
             "n_envs": self.n_envs,
+            "novelty": self.novelty,
+            "novelty_neighbours": self.novelty_neighbours,
             "timesteps": self.model.num_timesteps,
             **self.hyperparameters,
         }
@@ -218,3 +243,30 @@ class RecordingVecEnv(VecEnvWrapper):
             if episode is not None and self.recorder.episodes_done < self.budget:
                 self.recorder.record(episode)
         return observations, np.asarray(rewards), dones, infos
+
+
+class NoveltyBonus(VecEnvWrapper):
+    """Adds a dissimilarity bonus to the reward of every episode that ends in a failure (Corso
+    et al. 2019): ``weight`` x the mean descriptor distance of the failure to the ``k`` nearest
+    failures found before it, capped at ``NOVELTY_CAP``, so that PPO is pushed away from the
+    mechanisms it already knows."""
+
+    def __init__(self, venv: VecEnv, weight: float, neighbours: int) -> None:
+        super().__init__(venv)
+        self.weight = weight
+        self.archive = FailureArchive(neighbours)
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observations, rewards, dones, infos = self.venv.step_wait()
+        rewards = np.asarray(rewards, dtype=np.float32).copy()
+        for index, (done, info) in enumerate(zip(dones, infos, strict=True)):
+            summary = info.get("summary")
+            if done and isinstance(summary, EpisodeSummary) and summary.outcome == "failure":
+                novelty = min(self.archive.novelty(summary), NOVELTY_CAP)
+                rewards[index] += self.weight * novelty
+                info["novelty_bonus"] = self.weight * novelty
+                self.archive.add(summary)
+        return observations, rewards, dones, infos

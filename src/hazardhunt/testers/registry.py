@@ -23,6 +23,8 @@ from typing import Any
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester
+from hazardhunt.testers.cem import CrossEntropyTester
+from hazardhunt.testers.qd import QualityDiversityTester
 from hazardhunt.testers.random_sampling import RandomTester
 
 TesterFactory = Callable[..., Tester]
@@ -124,13 +126,13 @@ def colour_of(name: str) -> str:
     return OTHER_COLOURS[zlib.crc32(name.encode()) % len(OTHER_COLOURS)]
 
 
-def _ppo(name: str, reward: RewardKind) -> TesterFactory:
+def _ppo(name: str, reward: RewardKind, **defaults: Any) -> TesterFactory:
     """The factory of a PPO tester; Stable-Baselines3 and torch load only when one is built."""
 
     def factory(seed: int, **params: Any) -> Tester:
         from hazardhunt.testers.ppo import PPOTester
 
-        return PPOTester(name, reward, seed, params)
+        return PPOTester(name, reward, seed, defaults | params)
 
     return factory
 
@@ -155,4 +157,27 @@ register_tester(
     reward="max",
     description="PPO (Stable-Baselines3) learning from the episode's maximum risk",
     colour="#ff7f0e",
+)
+register_tester(
+    "cem",
+    CrossEntropyTester,
+    reward="max",
+    description="the cross-entropy method over whole action sequences, restarting away from "
+    "the failure mechanisms it has found",
+    colour="#2ca02c",
+)
+register_tester(
+    "qd",
+    QualityDiversityTester,
+    reward="max",
+    description="quality-diversity (pyribs CMA-ME) over an archive of failure descriptors",
+    colour="#9467bd",
+)
+register_tester(
+    "ppo-novelty",
+    _ppo("ppo-novelty", "max", novelty=100.0),
+    reward="max",
+    description="PPO learning from the episode's maximum risk plus a bonus for failures unlike "
+    "those found before (Corso et al. 2019)",
+    colour="#8c564b",
 )

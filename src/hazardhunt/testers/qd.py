@@ -1,0 +1,197 @@
+"""Quality-diversity search over whole episodes (pyribs: CMA-ME, or CMA-MAE).
+
+An episode is one point, the human's open-loop sequence of ``horizon`` decisions; its quality
+is its maximum risk (100 to 200 for an unsafe contact, otherwise exp(-clearance) while the robot
+moves) and its measures describe how it met the robot (:mod:`hazardhunt.spec.descriptors`): by
+default the bearing of the contact (or closest approach) around the robot's body, the robot's
+speed there and the safety layer's history. An archive keeps the best episode of every cell of
+that grid, so the search is rewarded for filling cells it has not reached, that is for new
+mechanisms, rather than for finding one failure again. CMA-ME (Fontaine et al. 2020) drives
+CMA-ES emitters by archive improvement; CMA-MAE (Fontaine and Nikolaidis 2023) anneals the
+acceptance threshold of each cell.
+
+The run keeps the archive (``tester/archive.parquet``); the report draws it as a heat map.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES, describe
+from hazardhunt.testers.base import EpisodeRecorder
+
+ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
+
+
+class QualityDiversityTester:
+    """CMA-ME / CMA-MAE emitters over an archive of failure descriptors."""
+
+    name = "qd"
+
+    def __init__(
+        self,
+        seed: int,
+        measures: Sequence[str] = DESCRIPTOR_NAMES,
+        bins: Sequence[int] = (12, 4, 3),
+        algorithm: str = "cma-me",
+        emitters: int = 4,
+        batch_size: int = 10,
+        sigma0: float = 0.5,
+        learning_rate: float = 0.02,
+        n_workers: int = 1,
+    ) -> None:
+        """Args:
+        seed: Seeds the archive and the emitters.
+        measures: The descriptor entries that span the archive (of ``bearing``,
+            ``robot_speed``, ``emergency_stop``).
+        bins: Cells along each measure.
+        algorithm: ``cma-me``, ``cma-mae``, or ``map-elites`` (Gaussian mutation of archive
+            elites, started from uniformly random sequences).
+        emitters: Emitters (CMA-ES ones, or Gaussian ones for ``map-elites``).
+        batch_size: Episodes each emitter asks for per iteration.
+        sigma0: The emitters' initial step size, or the mutation's spread for ``map-elites``
+            (actions are in [-1, 1]).
+        learning_rate: CMA-MAE's archive learning rate (``cma-mae`` only).
+        n_workers: Processes that play each batch (1: in the run's own process).
+
+        Raises:
+            ValueError: An unknown measure or algorithm, or a setting out of its range.
+        """
+        measures, bins = list(measures), [int(b) for b in bins]
+        unknown = [m for m in measures if m not in DESCRIPTOR_NAMES]
+        if unknown or not measures or len(set(measures)) != len(measures):
+            raise ValueError(
+                f"tester 'qd': measures must be distinct names of {', '.join(DESCRIPTOR_NAMES)}, "
+                f"not {measures!r}"
+            )
+        if len(bins) != len(measures) or any(b < 1 for b in bins):
+            raise ValueError(
+                f"tester 'qd': bins must be one whole number >= 1 per measure, not {bins!r}"
+            )
+        if algorithm not in ALGORITHMS:
+            raise ValueError(
+                f"tester 'qd': algorithm must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}"
+            )
+        for key, value in (("emitters", emitters), ("batch_size", batch_size)):
+            if value < 1:
+                raise ValueError(f"tester 'qd': {key} must be at least 1, not {value!r}")
+        if not (sigma0 > 0 and 0 < learning_rate <= 1 and n_workers >= 1):
+            raise ValueError("tester 'qd': sigma0 > 0, 0 < learning_rate <= 1, n_workers >= 1")
+        self.seed = seed
+        self.measures = measures
+        self.bins = bins
+        self.algorithm = algorithm
+        self.emitters = emitters
+        self.batch_size = batch_size
+        self.sigma0 = sigma0
+        self.learning_rate = learning_rate
+        self.n_workers = n_workers
+        self.archive: Any = None
+
+    def explore(self, env: EpisodeRecorder, episodes: int) -> None:
+        scheduler = self._scheduler(env)
+        columns = [DESCRIPTOR_NAMES.index(m) for m in self.measures]
+        horizon = env.horizon
+        try:
+            while env.episodes_done < episodes:
+                solutions = scheduler.ask()
+                left = episodes - env.episodes_done
+                sequences = solutions[:left].reshape(-1, horizon, 2)
+                results = env.evaluate_batch(list(sequences), self.n_workers)
+                if len(results) < len(solutions):
+                    break  # the budget ends within this batch: nothing to learn from it
+                objective = [result.summary.max_risk for result in results]
+                measures = [describe(result.summary)[columns] for result in results]
+                scheduler.tell(objective, measures)
+        finally:
+            env.close_pool()
+
+    def _scheduler(self, env: EpisodeRecorder) -> Any:
+        from ribs.archives import GridArchive
+        from ribs.emitters import EvolutionStrategyEmitter
+        from ribs.schedulers import Scheduler
+
+        ranges = {
+            "bearing": (-np.pi, np.pi),
+            "robot_speed": (0.0, env.simulation.robot_params.max_speed),
+            "emergency_stop": (-0.5, 2.5),
+        }
+        dimension = env.horizon * 2
+        grid: dict[str, Any] = {"dims": self.bins, "ranges": [ranges[m] for m in self.measures]}
+        self.archive = GridArchive(solution_dim=dimension, seed=self.seed, **grid)
+        archive, ranker = self.archive, "2imp"
+        if self.algorithm == "cma-mae":
+            archive = GridArchive(
+                solution_dim=dimension,
+                learning_rate=self.learning_rate,
+                threshold_min=0.0,
+                seed=self.seed,
+                **grid,
+            )
+            ranker = "imp"
+        if self.algorithm == "map-elites":
+            return Scheduler(archive, self._gaussian_emitters(archive, dimension))
+        emitters = [
+            EvolutionStrategyEmitter(
+                archive,
+                x0=np.zeros(dimension),
+                sigma0=self.sigma0,
+                ranker=ranker,
+                bounds=[(-1.0, 1.0)] * dimension,
+                batch_size=self.batch_size,
+                seed=self.seed * 1000 + index,
+            )
+            for index in range(self.emitters)
+        ]
+        result_archive = self.archive if archive is not self.archive else None
+        return Scheduler(archive, emitters, result_archive=result_archive)
+
+    def _gaussian_emitters(self, archive: Any, dimension: int) -> list[Any]:
+        from ribs.emitters import GaussianEmitter
+
+        rng = np.random.default_rng(self.seed)
+        return [
+            GaussianEmitter(
+                archive,
+                sigma=self.sigma0,
+                initial_solutions=rng.uniform(-1.0, 1.0, (self.batch_size, dimension)),
+                bounds=[(-1.0, 1.0)] * dimension,
+                batch_size=self.batch_size,
+                seed=self.seed * 1000 + index,
+            )
+            for index in range(self.emitters)
+        ]
+
+    def archive_table(self) -> pd.DataFrame:
+        """The archive: one row per filled cell, its measures, objective (the episode's maximum
+        risk) and the cell's index."""
+        if self.archive is None:
+            raise RuntimeError("tester 'qd': explore() before reading the archive")
+        data = self.archive.data(["index", "objective", "measures"], return_type="pandas")
+        table: pd.DataFrame = data.rename(
+            columns={f"measures_{i}": name for i, name in enumerate(self.measures)}
+        )
+        return table
+
+    def save(self, directory: Path) -> None:
+        """The archive (``archive.parquet``) and the settings (``qd.json``)."""
+        directory.mkdir(parents=True, exist_ok=True)
+        self.archive_table().to_parquet(directory / "archive.parquet", index=False)
+        settings = {
+            "tester": self.name,
+            "seed": self.seed,
+            "algorithm": self.algorithm,
+            "measures": self.measures,
+            "bins": self.bins,
+            "emitters": self.emitters,
+            "batch_size": self.batch_size,
+            "sigma0": self.sigma0,
+            "learning_rate": self.learning_rate,
+        }
+        (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")

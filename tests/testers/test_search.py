@@ -1,0 +1,88 @@
+"""The episode-level searchers (cem, qd) and the novelty bonus of ppo-novelty."""
+
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.run import record_run
+from hazardhunt.env.agv import AGVEnv
+from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES
+from hazardhunt.testers import make_tester
+from hazardhunt.testers.ppo import NOVELTY_CAP, NoveltyBonus
+from tests.helpers import run_tables
+
+RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.json").read_text())
+
+
+def test_the_qd_archive_is_kept_with_its_measures(seeded_run):
+    run = seeded_run("qd", 0)
+    archive = pd.read_parquet(run / "tester" / "archive.parquet")
+    assert len(archive) > 3  # cells of different mechanisms
+    assert set(DESCRIPTOR_NAMES) <= set(archive.columns)
+    assert archive["bearing"].between(-np.pi, np.pi).all()
+    episodes = pd.read_parquet(run / "episodes.parquet")
+    # Every cell holds the best episode that fell into it: no cell beats the best episode.
+    assert archive["objective"].max() == pytest.approx(episodes["max_risk"].max())
+
+
+@pytest.mark.slow
+def test_a_batch_on_two_worker_processes_gives_the_same_run():
+    def run(workers):
+        directory = Path(tempfile.mkdtemp()) / "run"
+        params = {"population": 6, "n_workers": workers}
+        config = RunConfig(
+            scenario="head-on",
+            field="none",
+            tester="cem",
+            tester_params=params,
+            seed=3,
+            episodes=12,
+        )
+        record_run(config, directory)
+        return run_tables(directory)
+
+    (episodes_1, failures_1), (episodes_2, failures_2) = run(1), run(2)
+    pd.testing.assert_frame_equal(episodes_1, episodes_2)
+    pd.testing.assert_frame_equal(failures_1, failures_2)
+
+
+@pytest.mark.parametrize(
+    ("tester", "params", "message"),
+    [
+        ("cem", {"population": 1}, "population is out of range"),
+        ("cem", {"elite_fraction": 1.5}, "elite_fraction is out of range"),
+        ("cem", {"populaton": 10}, "does not take these parameters"),
+        ("qd", {"measures": ["bearing", "colour"]}, "measures must be distinct names of"),
+        ("qd", {"bins": [4, 4]}, "bins must be one whole number >= 1 per measure"),
+        ("qd", {"algorithm": "nsga"}, "algorithm must be one of cma-me, cma-mae, map-elites"),
+        ("ppo-novelty", {"novelty": -1}, "novelty must be a number >= 0"),
+    ],
+)
+def test_bad_search_parameters_are_clear_errors(tester, params, message):
+    with pytest.raises(ValueError, match=message):
+        make_tester(tester, 0, params)
+
+
+def test_the_novelty_bonus_pays_for_a_new_failure_not_for_the_same_one_again():
+    example = RECORDED["examples"]["front/moving"]
+    env = AGVEnv(example["scenario"], example["field"], decision_period=example["decision_period"])
+    venv = NoveltyBonus(DummyVecEnv([lambda: env]), weight=100.0, neighbours=1)
+    bonuses = []
+    for _ in range(2):
+        venv.reset()
+        for action in example["actions"]:
+            _, rewards, dones, infos = venv.step(np.array([action], dtype=np.float32))
+            if dones[0]:
+                summary = infos[0]["summary"]
+                assert summary.outcome == "failure"
+                bonuses.append(rewards[0] - summary.max_risk)
+                break
+    # The first failure is as novel as can be; the same failure again earns nothing.
+    assert bonuses[0] == pytest.approx(100.0 * NOVELTY_CAP, rel=1e-6)
+    assert bonuses[1] == pytest.approx(0.0, abs=1e-4)
