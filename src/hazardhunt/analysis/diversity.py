@@ -1,0 +1,391 @@
+"""Diversity beyond the taxonomy (SPEC 10): failures clustered on features of their trajectories.
+
+A failure's class is hazardhunt's own reading of its mechanism, so counting classes favours
+whatever that taxonomy happens to separate. Here every failure becomes a vector of numbers read
+from its stored trajectory at and before the contact (:data:`FEATURE_NAMES`), standardised, and
+clustered with scikit-learn: HDBSCAN by default, k-means with the number of clusters of the best
+silhouette as the alternative. Comparing the clusters with the classes (counts, the adjusted
+Rand index, a contingency table) shows whether the classes split what the data splits.
+
+Everything is deterministic: HDBSCAN has no randomness, and k-means, the silhouette's sample
+and t-SNE take a fixed ``random_state``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from sklearn.cluster import HDBSCAN, KMeans
+from sklearn.decomposition import PCA
+from sklearn.manifold import TSNE
+from sklearn.metrics import adjusted_rand_score, silhouette_score
+from sklearn.preprocessing import StandardScaler
+
+from hazardhunt.analysis.results import RUN_KEYS, Results
+from hazardhunt.spec.failure_classes import FACES
+from hazardhunt.world.geometry import to_body_frame
+
+FEATURE_NAMES = (
+    "bearing_cos",
+    "bearing_sin",
+    *(f"face_{face}" for face in FACES),
+    "relative_forward_velocity",
+    "relative_left_velocity",
+    "robot_speed",
+    "stops_before_contact",
+    "stop_holding",
+    "time_since_release",
+    "time_to_contact",
+    "contact_x",
+    "contact_y",
+)
+"""The features of a failure, in order:
+
+- ``bearing_cos``, ``bearing_sin``: where the human's centre was around the robot's body at
+  the contact (the bearing in the robot's frame: 0 ahead, pi/2 on the left), as its cosine and
+  sine so that bearings just either side of +-pi (behind) lie close together;
+- ``face_front`` ... ``face_rear``: the robot's face touched, one-hot (all 0 without a face);
+- ``relative_forward_velocity``, ``relative_left_velocity``: the human's velocity relative to
+  the robot's centre, in the robot's frame at the contact, in m/s (the human's from its last
+  two positions);
+- ``robot_speed``: the robot's speed at the contact, in m/s;
+- ``stops_before_contact``: emergency stops the safety layer triggered up to the contact, as
+  seen in the samples (every 0.2 s);
+- ``stop_holding``: 1 if the stop held at the contact (the robot braked), else 0;
+- ``time_since_release``: time from the release of the last stop to the contact, in s (0
+  while the stop holds, and without a released stop: then the time to contact says it all);
+- ``time_to_contact``: the simulated time of the contact, in s;
+- ``contact_x``, ``contact_y``: the human's position on the floor at the contact, in m.
+"""
+
+TRAJECTORY_FEATURE_COLUMNS = (
+    "episode",
+    "time",
+    "human_x",
+    "human_y",
+    "robot_x",
+    "robot_y",
+    "robot_heading",
+    "robot_speed",
+    "emergency_stop",
+)
+"""The stored trajectory columns the features are read from."""
+
+ClusterMethod = Literal["hdbscan", "kmeans"]
+EmbeddingMethod = Literal["pca", "tsne"]
+
+CASE = ("scenario", "field")
+"""What the report clusters separately: each (scenario, field) case, testers and seeds pooled,
+as Table I counts the classes of a case."""
+
+ALL = "all"
+"""Stands for every scenario, field or tester in a row of :func:`clusters_against_classes`."""
+
+FEWEST_TO_SPLIT = 4
+"""Fewer failures than this form one cluster: too few to tell groups apart."""
+
+
+# ------------------------------------------------------------------ features
+def contact_features(samples: pd.DataFrame, contact_face: str | None) -> dict[str, float]:
+    """The features (:data:`FEATURE_NAMES`) of one failure.
+
+    Args:
+        samples: The failure's trajectory (columns of
+            :class:`~hazardhunt.spec.episode.TrajectorySample`), in time order, the contact
+            last; at least one sample.
+        contact_face: The robot's face touched (``front``, ``left``, ``right``, ``rear``), or
+            None.
+    """
+    time = samples["time"].to_numpy(np.float64)
+    contact = samples.iloc[-1]
+    heading = float(contact["robot_heading"])
+    human = np.array([float(contact["human_x"]), float(contact["human_y"])])
+    forward, left = to_body_frame(
+        human, float(contact["robot_x"]), float(contact["robot_y"]), heading
+    )
+    bearing = math.atan2(left, forward)
+    speed = float(contact["robot_speed"])
+    relative = _human_velocity(samples) - speed * np.array([math.cos(heading), math.sin(heading)])
+    relative_forward, relative_left = to_body_frame(relative, 0.0, 0.0, heading)
+    stops = samples["emergency_stop"].to_numpy(bool)
+    before = np.concatenate([[False], stops[:-1]])
+    releases = time[~stops & before]
+    holding = bool(stops[-1])
+    return {
+        "bearing_cos": math.cos(bearing),
+        "bearing_sin": math.sin(bearing),
+        **{f"face_{face}": float(contact_face == face) for face in FACES},
+        "relative_forward_velocity": relative_forward,
+        "relative_left_velocity": relative_left,
+        "robot_speed": speed,
+        "stops_before_contact": float(np.count_nonzero(stops & ~before)),
+        "stop_holding": float(holding),
+        "time_since_release": (
+            float(time[-1] - releases[-1]) if releases.size and not holding else 0.0
+        ),
+        "time_to_contact": float(time[-1]),
+        "contact_x": float(human[0]),
+        "contact_y": float(human[1]),
+    }
+
+
+def _human_velocity(samples: pd.DataFrame) -> NDArray[np.float64]:
+    """The human's velocity between the last two samples with distinct times, in m/s (world
+    frame; 0 with one sample)."""
+    time = samples["time"].to_numpy(np.float64)
+    positions = samples[["human_x", "human_y"]].to_numpy(np.float64)
+    earlier = np.flatnonzero(time < time[-1])
+    if earlier.size == 0:
+        return np.zeros(2)
+    previous = earlier[-1]
+    velocity = (positions[-1] - positions[previous]) / (time[-1] - time[previous])
+    return np.asarray(velocity, dtype=np.float64)
+
+
+def failure_features(results: Results) -> pd.DataFrame:
+    """The features of every failure whose trajectory is stored.
+
+    Returns:
+        One row per failure, in the order of ``results.failures``: the run's keys, ``episode``,
+        ``class`` and :data:`FEATURE_NAMES`.
+    """
+    rows: list[dict[str, Any]] = []
+    failures = results.failures
+    for run_id, group in failures.groupby("run_id", sort=False):
+        trajectories = _run_trajectories(results, str(run_id))
+        for _, failure in group.iterrows():
+            samples = trajectories.get(int(failure["episode"]))
+            if samples is None:
+                continue  # a run recorded without trajectories
+            face = failure.get("contact_face")
+            rows.append(
+                {
+                    **{key: failure[key] for key in (*RUN_KEYS, "episode", "class")},
+                    **contact_features(samples, face if isinstance(face, str) else None),
+                }
+            )
+    return pd.DataFrame(rows, columns=[*RUN_KEYS, "episode", "class", *FEATURE_NAMES])
+
+
+def _run_trajectories(results: Results, run_id: str) -> dict[int, pd.DataFrame]:
+    """Every stored trajectory of a run by episode, samples in time order."""
+    folder = results.run_directory(run_id) / "trajectories"
+    if not any(folder.glob("*.parquet")):
+        return {}
+    stored = pd.read_parquet(folder, columns=list(TRAJECTORY_FEATURE_COLUMNS))
+    stored = stored.sort_values(["episode", "time"], kind="stable")
+    return {int(episode): samples for episode, samples in stored.groupby("episode", sort=False)}
+
+
+def standardised(features: pd.DataFrame) -> NDArray[np.float64]:
+    """The features as a matrix, each column shifted to mean 0 and scaled to variance 1 (a
+    constant column stays 0)."""
+    values = np.asarray(features[list(FEATURE_NAMES)], dtype=np.float64)
+    if len(values) == 0:
+        return values
+    return np.asarray(StandardScaler().fit_transform(values), dtype=np.float64)
+
+
+# ------------------------------------------------------------------ clustering
+def default_min_cluster_size(failures: int) -> int:
+    """HDBSCAN's smallest cluster for this many failures: 5, or half the square root of the
+    failures beyond 100 (16 for 1,000, 50 for 10,000), at most half of them, at least 2."""
+    return max(2, min(failures // 2, max(5, round(math.sqrt(failures) / 2))))
+
+
+def cluster_labels(
+    points: NDArray[np.float64],
+    method: ClusterMethod = "hdbscan",
+    min_cluster_size: int | None = None,
+    max_clusters: int = 10,
+    random_state: int = 0,
+) -> NDArray[np.int64]:
+    """The cluster of every point: 0 for the largest cluster, 1 for the next, ...; -1 for a
+    point HDBSCAN leaves unclustered (noise).
+
+    Args:
+        points: One row per failure (standardised features).
+        method: ``hdbscan``, or ``kmeans`` with the number of clusters (2 to
+            ``max_clusters``) of the best silhouette.
+        min_cluster_size: HDBSCAN's smallest cluster (default:
+            :func:`default_min_cluster_size`).
+        max_clusters: The most clusters k-means tries.
+        random_state: Seeds k-means and the silhouette's sample.
+    """
+    count = len(points)
+    if count < FEWEST_TO_SPLIT:
+        return np.zeros(count, dtype=np.int64)
+    if method == "hdbscan":
+        smallest = min_cluster_size or default_min_cluster_size(count)
+        labels = HDBSCAN(min_cluster_size=smallest, copy=True).fit_predict(points)
+    elif method == "kmeans":
+        labels = _best_kmeans(points, max_clusters, random_state)
+    else:
+        raise ValueError(f"unknown clustering method {method!r}: hdbscan or kmeans")
+    return _by_size(np.asarray(labels, dtype=np.int64))
+
+
+def _best_kmeans(
+    points: NDArray[np.float64], max_clusters: int, random_state: int
+) -> NDArray[np.int64]:
+    """k-means with the k of the best silhouette (one cluster if no k splits the points)."""
+    best_score, best = -math.inf, np.zeros(len(points), dtype=np.int64)
+    sample = len(points) if len(points) <= 2000 else 2000  # the silhouette is quadratic
+    for k in range(2, min(max_clusters, len(points) - 1) + 1):
+        labels = KMeans(n_clusters=k, n_init=10, random_state=random_state).fit_predict(points)
+        if len(np.unique(labels)) < 2:
+            continue
+        score = silhouette_score(points, labels, sample_size=sample, random_state=random_state)
+        if score > best_score:
+            best_score, best = float(score), np.asarray(labels, dtype=np.int64)
+    return best
+
+
+def _by_size(labels: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Renumber clusters by size, largest first (ties: first seen first); -1 stays."""
+    clustered = labels[labels >= 0]
+    ids, first, sizes = np.unique(clustered, return_index=True, return_counts=True)
+    order = sorted(range(len(ids)), key=lambda i: (-sizes[i], first[i]))
+    mapping = {int(ids[i]): rank for rank, i in enumerate(order)}
+    return np.array([mapping.get(int(label), -1) for label in labels], dtype=np.int64)
+
+
+def cluster_failures(
+    features: pd.DataFrame,
+    by: Sequence[str] = CASE,
+    method: ClusterMethod = "hdbscan",
+    min_cluster_size: int | None = None,
+) -> pd.DataFrame:
+    """``features`` with a ``cluster`` column: each group of ``by`` (default: every (scenario,
+    field) case; ``()``: all failures together) standardised and clustered on its own, so
+    cluster ids are per group."""
+    clusters = pd.Series(-1, index=features.index, dtype=np.int64)
+    for _, group in _groups(features, by):
+        points = standardised(group)
+        clusters[group.index] = cluster_labels(points, method, min_cluster_size)
+    return features.assign(cluster=clusters)
+
+
+def _groups(features: pd.DataFrame, by: Sequence[str]) -> list[tuple[Any, pd.DataFrame]]:
+    if not by:
+        return [((), features)]
+    return list(features.groupby(list(by), sort=True))
+
+
+def clusters_against_classes(
+    features: pd.DataFrame,
+    method: ClusterMethod = "hdbscan",
+    min_cluster_size: int | None = None,
+) -> pd.DataFrame:
+    """Clusters found beside classes found, per (scenario, field) case and tester.
+
+    Each case is clustered on its own (testers and seeds pooled); a tester's row counts the
+    clusters of its case its failures fall into. With more than one case, all failures are also
+    clustered together (scenario and field ``all``). The adjusted Rand index compares the
+    clusters with the classes over the clustered failures (noise left out): 1 when both split
+    the failures alike, about 0 when they are unrelated.
+    """
+    cases = cluster_failures(features, CASE, method, min_cluster_size)
+    rows = []
+    if features[list(CASE)].drop_duplicates().shape[0] > 1:
+        pooled = cluster_failures(features, (), method, min_cluster_size)
+        rows += _count_rows(pooled, {"scenario": ALL, "field": ALL})
+    for (scenario, field), group in cases.groupby(list(CASE), sort=True):
+        rows += _count_rows(group, {"scenario": scenario, "field": field})
+    columns = [
+        "scenario",
+        "field",
+        "tester",
+        "failures",
+        "classes",
+        "clusters",
+        "unclustered",
+        "adjusted Rand index",
+    ]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _count_rows(clustered: pd.DataFrame, keys: dict[str, str]) -> list[dict[str, Any]]:
+    """One row for all testers of ``clustered``, and one per tester if there are several."""
+    rows = [_counts(clustered, keys | {"tester": ALL})]
+    testers = sorted(clustered["tester"].unique())
+    if len(testers) > 1:
+        rows += [
+            _counts(clustered[clustered["tester"] == t], keys | {"tester": t}) for t in testers
+        ]
+    return rows
+
+
+def _counts(clustered: pd.DataFrame, keys: dict[str, str]) -> dict[str, Any]:
+    inside = clustered[clustered["cluster"] >= 0]
+    agreement = (
+        adjusted_rand_score(inside["class"], inside["cluster"]) if len(inside) > 1 else math.nan
+    )
+    return keys | {
+        "failures": len(clustered),
+        "classes": clustered["class"].nunique(),
+        "clusters": inside["cluster"].nunique(),
+        "unclustered": len(clustered) - len(inside),
+        "adjusted Rand index": float(agreement),
+    }
+
+
+def contingency_table(clustered: pd.DataFrame) -> pd.DataFrame:
+    """Failures of each class in each cluster, one row per (scenario, field, class) from the
+    clusters of :func:`cluster_failures`: columns ``cluster 0``, ``cluster 1``, ... and
+    ``unclustered`` (blank where a case has no such cluster). A class spread over clusters was
+    split by the data; a cluster spread over classes was split by the taxonomy only."""
+    if clustered.empty:
+        return pd.DataFrame(columns=["scenario", "field", "class"])
+    names = clustered["cluster"].map(lambda c: "unclustered" if c < 0 else f"cluster {c}")
+    counts = pd.crosstab([clustered["scenario"], clustered["field"], clustered["class"]], names)
+    present = [c for c in counts.columns if c != "unclustered"]
+    ordered = sorted(present, key=lambda name: int(name.split()[1]))
+    if "unclustered" in counts.columns:
+        ordered.append("unclustered")
+    table = counts[ordered].astype(object).reset_index().rename_axis(columns=None)
+    for (scenario, field), group in table.groupby(list(CASE), sort=False):
+        case = clustered[(clustered["scenario"] == scenario) & (clustered["field"] == field)]
+        absent = [c for c in ordered if c not in set(names[case.index])]
+        table.loc[group.index, absent] = ""
+    return table
+
+
+# ------------------------------------------------------------------ embedding
+def embed(
+    features: pd.DataFrame,
+    by: Sequence[str] = CASE,
+    method: EmbeddingMethod = "pca",
+    random_state: int = 0,
+) -> pd.DataFrame:
+    """``features`` with ``x`` and ``y``: a 2-D embedding of each group's standardised
+    features (PCA by default; t-SNE with ``method="tsne"``), for a picture."""
+    coordinates = pd.DataFrame(0.0, index=features.index, columns=["x", "y"])
+    for _, group in _groups(features, by):
+        points = standardised(group)
+        coordinates.loc[group.index, ["x", "y"]] = _embedding(points, method, random_state)
+    return features.assign(x=coordinates["x"], y=coordinates["y"])
+
+
+def _embedding(
+    points: NDArray[np.float64], method: EmbeddingMethod, random_state: int
+) -> NDArray[np.float64]:
+    plane = np.zeros((len(points), 2))
+    if len(points) < 2:
+        return plane
+    if method == "pca":
+        components = min(2, len(points))
+        plane[:, :components] = PCA(components, random_state=random_state).fit_transform(points)
+    elif method == "tsne":
+        perplexity = min(30.0, (len(points) - 1) / 3)
+        plane[:] = TSNE(
+            2, perplexity=perplexity, init="pca", random_state=random_state
+        ).fit_transform(points)
+    else:
+        raise ValueError(f"unknown embedding {method!r}: pca or tsne")
+    return plane
