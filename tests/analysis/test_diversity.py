@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from hazardhunt.analysis import diversity
+from hazardhunt.analysis import diversity, tables
 from hazardhunt.analysis.results import Results
 from hazardhunt.spec.episode import TrajectorySample
 
@@ -184,6 +184,42 @@ def test_the_embedding_is_two_dimensional_and_the_same_every_time(tmp_path):
     assert first[["x", "y"]].notna().all().all()
     assert first["x"].std() > 0
     assert first[["x", "y"]].equals(again[["x", "y"]])
+
+
+FAILURES = pd.DataFrame(
+    [
+        ("random", 0, 3, "c1"),
+        ("random", 0, 5, "c1"),
+        ("random", 0, 9, "c2"),
+        ("random", 1, 2, "c2"),
+        ("random", 1, 7, "other"),
+        ("random", 1, 12, "c3"),
+        ("ppo-max", 0, 0, "c1"),
+    ],
+    columns=["tester", "seed", "episode", "class"],
+).assign(scenario="crossing", field="2m")
+RUNS = pd.DataFrame(
+    [(tester, seed, 20) for tester in ("random", "ppo-max") for seed in (0, 1)],
+    columns=["tester", "seed", "episodes"],
+).assign(scenario="crossing", field="2m")
+
+
+def test_the_classes_found_against_episodes_step_up_at_each_first_find():
+    curves = tables.class_discovery_curves(tables.class_discovery(FAILURES), RUNS)
+    steps = {
+        tester: list(zip(group["episodes"], group["classes found"], strict=True))
+        for tester, group in curves.groupby("tester")
+    }
+    # c2 first in episode 2 (seed 1), c1 in 3 (seed 0), c3 in 12; other is not counted.
+    assert steps["random"] == [(0, 0), (3, 1), (4, 2), (13, 3), (20, 3)]
+    assert steps["ppo-max"] == [(0, 0), (1, 1), (20, 1)]
+
+
+def test_the_first_found_table_gives_each_testers_earliest_episode():
+    table = tables.class_first_found(tables.class_discovery(FAILURES))
+    assert table["class"].tolist() == ["c1", "c2", "other", "c3"]
+    assert table["random"].tolist() == [3, 2, 7, 12]
+    assert table["ppo-max"].tolist() == [0, "", "", ""]
 
 
 def test_the_cluster_counts_have_a_row_per_case_and_tester_and_one_for_all(tmp_path):
