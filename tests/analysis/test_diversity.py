@@ -241,3 +241,14 @@ def test_the_cluster_counts_have_a_row_per_case_and_tester_and_one_for_all(tmp_p
         ["head-on", "ppo-max", 4],
         ["head-on", "random", 4],
     ]
+
+
+@pytest.mark.parametrize("method", ["hdbscan", "kmeans"])
+def test_one_failure_found_again_and_again_is_one_cluster(tmp_path, method):
+    trajectory = side_contact(1, 1.0, 3.0, 0.0)
+    features = diversity.failure_features(
+        results_of(tmp_path, [("left/moving", "left", trajectory)] * 10)
+    )
+    counts = diversity.clusters_against_classes(features, method=method)
+    assert counts.loc[0, ["clusters", "unclustered"]].tolist() == [1, 0]
+    assert (diversity.embed(features)[["x", "y"]] == 0.0).all().all()

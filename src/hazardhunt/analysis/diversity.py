@@ -218,7 +218,7 @@ def cluster_labels(
         random_state: Seeds k-means and the silhouette's sample.
     """
     count = len(points)
-    if count < FEWEST_TO_SPLIT:
+    if count < FEWEST_TO_SPLIT or _distinct(points) < 2:
         return np.zeros(count, dtype=np.int64)
     if method == "hdbscan":
         smallest = min_cluster_size or default_min_cluster_size(count)
@@ -236,7 +236,7 @@ def _best_kmeans(
     """k-means with the k of the best silhouette (one cluster if no k splits the points)."""
     best_score, best = -math.inf, np.zeros(len(points), dtype=np.int64)
     sample = len(points) if len(points) <= 2000 else 2000  # the silhouette is quadratic
-    for k in range(2, min(max_clusters, len(points) - 1) + 1):
+    for k in range(2, min(max_clusters, len(points) - 1, _distinct(points)) + 1):
         labels = KMeans(n_clusters=k, n_init=10, random_state=random_state).fit_predict(points)
         if len(np.unique(labels)) < 2:
             continue
@@ -244,6 +244,11 @@ def _best_kmeans(
         if score > best_score:
             best_score, best = float(score), np.asarray(labels, dtype=np.int64)
     return best
+
+
+def _distinct(points: NDArray[np.float64]) -> int:
+    """How many different points there are (failures can repeat one another exactly)."""
+    return len(np.unique(points, axis=0))
 
 
 def _by_size(labels: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -376,8 +381,8 @@ def _embedding(
     points: NDArray[np.float64], method: EmbeddingMethod, random_state: int
 ) -> NDArray[np.float64]:
     plane = np.zeros((len(points), 2))
-    if len(points) < 2:
-        return plane
+    if len(points) < 2 or _distinct(points) < 2:
+        return plane  # nothing to spread out (and t-SNE fails on it)
     if method == "pca":
         components = min(2, len(points))
         plane[:, :components] = PCA(components, random_state=random_state).fit_transform(points)
