@@ -67,15 +67,15 @@ def results_of(tmp_path: Path, failures: list[tuple[str, str, list[TrajectorySam
     return Results(tmp_path, runs, episodes=empty, failures=table, loitering=empty)
 
 
-def two_groups(tmp_path: Path) -> Results:
-    """Eight fast contacts on the left, eight slow ones on the right, a little scatter."""
+def two_groups(tmp_path: Path, size: int = 8) -> Results:
+    """``size`` fast contacts on the left, as many slow ones on the right, a little scatter."""
     random = np.random.default_rng(3)
     failures = []
     for side, speed, name, face in (
         (1, 1.0, "left/moving", "left"),
         (-1, 0.3, "right/moving", "right"),
     ):
-        for _ in range(8):
+        for _ in range(size):
             trajectory = side_contact(
                 side, speed, 3.0 + random.uniform(0.0, 0.15), random.uniform(-0.1, 0.1)
             )
@@ -252,3 +252,13 @@ def test_one_failure_found_again_and_again_is_one_cluster(tmp_path, method):
     counts = diversity.clusters_against_classes(features, method=method)
     assert counts.loc[0, ["clusters", "unclustered"]].tolist() == [1, 0]
     assert (diversity.embed(features)[["x", "y"]] == 0.0).all().all()
+
+
+@pytest.mark.parametrize("method", ["hdbscan", "kmeans"])
+def test_failures_beyond_the_sample_join_the_cluster_of_their_nearest_neighbour(tmp_path, method):
+    features = diversity.failure_features(two_groups(tmp_path, size=20))
+    points = diversity.standardised(features)
+    labels = diversity.cluster_labels(points, method, most=20)
+    assert (labels >= 0).all()
+    cells = pd.crosstab(features["class"], labels).values.tolist()
+    assert sorted(cells) == [[0, 20], [20, 0]]

@@ -24,11 +24,11 @@ from sklearn.cluster import HDBSCAN, KMeans
 from sklearn.decomposition import PCA
 from sklearn.manifold import TSNE
 from sklearn.metrics import adjusted_rand_score, silhouette_score
+from sklearn.neighbors import NearestNeighbors
 from sklearn.preprocessing import StandardScaler
 
 from hazardhunt.analysis.results import RUN_KEYS, Results
 from hazardhunt.spec.failure_classes import FACES
-from hazardhunt.world.geometry import to_body_frame
 
 FEATURE_NAMES = (
     "bearing_cos",
@@ -89,62 +89,81 @@ ALL = "all"
 FEWEST_TO_SPLIT = 4
 """Fewer failures than this form one cluster: too few to tell groups apart."""
 
+MOST_CLUSTERED = 5000
+"""Above this many failures, a fixed random sample of this many is clustered and every other
+failure joins the cluster of its nearest sampled failure (HDBSCAN takes about 40 s for 30,000
+failures, and its time grows faster than their number)."""
+
 
 # ------------------------------------------------------------------ features
-def contact_features(samples: pd.DataFrame, contact_face: str | None) -> dict[str, float]:
-    """The features (:data:`FEATURE_NAMES`) of one failure.
+def trajectory_features(stored: pd.DataFrame, faces: pd.Series) -> pd.DataFrame:
+    """The features (:data:`FEATURE_NAMES`) of failures, from their stored trajectories.
 
     Args:
-        samples: The failure's trajectory (columns of
-            :class:`~hazardhunt.spec.episode.TrajectorySample`), in time order, the contact
-            last; at least one sample.
-        contact_face: The robot's face touched (``front``, ``left``, ``right``, ``rear``), or
-            None.
+        stored: Trajectories keyed by ``episode`` (and the columns of
+            :class:`~hazardhunt.spec.episode.TrajectorySample`), each in time order with the
+            contact last, as a run's ``trajectories/`` holds them.
+        faces: The robot's face touched (``front``, ``left``, ``right``, ``rear``; None without
+            one), by episode.
+
+    Returns:
+        One row per episode of ``stored`` (the index), in order of first appearance.
     """
-    time = samples["time"].to_numpy(np.float64)
-    contact = samples.iloc[-1]
-    heading = float(contact["robot_heading"])
-    human = np.array([float(contact["human_x"]), float(contact["human_y"])])
-    forward, left = to_body_frame(
-        human, float(contact["robot_x"]), float(contact["robot_y"]), heading
+    episode = stored["episode"]
+    contact = stored.groupby(episode, sort=False).tail(1).set_index("episode")
+    end = stored.groupby(episode, sort=False)["time"].transform("last")
+    earlier = stored[stored["time"] < end]
+    previous = earlier.groupby("episode", sort=False).tail(1).set_index("episode")
+    previous = previous.reindex(contact.index)
+    elapsed = contact["time"] - previous["time"]
+    human_vx = ((contact["human_x"] - previous["human_x"]) / elapsed).fillna(0.0)
+    human_vy = ((contact["human_y"] - previous["human_y"]) / elapsed).fillna(0.0)
+    cos, sin = np.cos(contact["robot_heading"]), np.sin(contact["robot_heading"])
+    speed = contact["robot_speed"]
+    forward, left = _robot_frame(
+        contact["human_x"] - contact["robot_x"], contact["human_y"] - contact["robot_y"], cos, sin
     )
-    bearing = math.atan2(left, forward)
-    speed = float(contact["robot_speed"])
-    relative = _human_velocity(samples) - speed * np.array([math.cos(heading), math.sin(heading)])
-    relative_forward, relative_left = to_body_frame(relative, 0.0, 0.0, heading)
-    stops = samples["emergency_stop"].to_numpy(bool)
-    before = np.concatenate([[False], stops[:-1]])
-    releases = time[~stops & before]
-    holding = bool(stops[-1])
-    return {
-        "bearing_cos": math.cos(bearing),
-        "bearing_sin": math.sin(bearing),
-        **{f"face_{face}": float(contact_face == face) for face in FACES},
-        "relative_forward_velocity": relative_forward,
-        "relative_left_velocity": relative_left,
-        "robot_speed": speed,
-        "stops_before_contact": float(np.count_nonzero(stops & ~before)),
-        "stop_holding": float(holding),
-        "time_since_release": (
-            float(time[-1] - releases[-1]) if releases.size and not holding else 0.0
-        ),
-        "time_to_contact": float(time[-1]),
-        "contact_x": float(human[0]),
-        "contact_y": float(human[1]),
-    }
+    relative_forward, relative_left = _robot_frame(
+        human_vx - speed * cos, human_vy - speed * sin, cos, sin
+    )
+    bearing = np.arctan2(left, forward)
+    stop = stored["emergency_stop"].astype(bool)
+    before = stop.groupby(episode, sort=False).shift(1, fill_value=False).astype(bool)
+    onsets = (stop & ~before).groupby(episode, sort=False).sum()
+    released_at = stored["time"].where(~stop & before).groupby(episode, sort=False).max()
+    holding = contact["emergency_stop"].astype(bool)
+    face = faces.reindex(contact.index)
+    return pd.DataFrame(
+        {
+            "bearing_cos": np.cos(bearing),
+            "bearing_sin": np.sin(bearing),
+            **{f"face_{name}": (face == name).astype(float) for name in FACES},
+            "relative_forward_velocity": relative_forward,
+            "relative_left_velocity": relative_left,
+            "robot_speed": speed,
+            "stops_before_contact": onsets.astype(float),
+            "stop_holding": holding.astype(float),
+            "time_since_release": (contact["time"] - released_at).where(~holding).fillna(0.0),
+            "time_to_contact": contact["time"],
+            "contact_x": contact["human_x"],
+            "contact_y": contact["human_y"],
+        },
+        index=contact.index,
+    ).astype(float)
 
 
-def _human_velocity(samples: pd.DataFrame) -> NDArray[np.float64]:
-    """The human's velocity between the last two samples with distinct times, in m/s (world
-    frame; 0 with one sample)."""
-    time = samples["time"].to_numpy(np.float64)
-    positions = samples[["human_x", "human_y"]].to_numpy(np.float64)
-    earlier = np.flatnonzero(time < time[-1])
-    if earlier.size == 0:
-        return np.zeros(2)
-    previous = earlier[-1]
-    velocity = (positions[-1] - positions[previous]) / (time[-1] - time[previous])
-    return np.asarray(velocity, dtype=np.float64)
+def _robot_frame(
+    east: pd.Series, north: pd.Series, cos: pd.Series, sin: pd.Series
+) -> tuple[pd.Series, pd.Series]:
+    """A world-frame vector in the frame of a robot heading (cos, sin): (forward, left)."""
+    return cos * east + sin * north, -sin * east + cos * north
+
+
+def contact_features(samples: pd.DataFrame, contact_face: str | None) -> dict[str, float]:
+    """The features (:data:`FEATURE_NAMES`) of one failure, from its trajectory (the columns of
+    :class:`~hazardhunt.spec.episode.TrajectorySample`, in time order, the contact last)."""
+    one = trajectory_features(samples.assign(episode=0), pd.Series({0: contact_face}))
+    return {name: float(value) for name, value in one.iloc[0].items()}
 
 
 def failure_features(results: Results) -> pd.DataFrame:
@@ -154,32 +173,20 @@ def failure_features(results: Results) -> pd.DataFrame:
         One row per failure, in the order of ``results.failures``: the run's keys, ``episode``,
         ``class`` and :data:`FEATURE_NAMES`.
     """
-    rows: list[dict[str, Any]] = []
-    failures = results.failures
-    for run_id, group in failures.groupby("run_id", sort=False):
-        trajectories = _run_trajectories(results, str(run_id))
-        for _, failure in group.iterrows():
-            samples = trajectories.get(int(failure["episode"]))
-            if samples is None:
-                continue  # a run recorded without trajectories
-            face = failure.get("contact_face")
-            rows.append(
-                {
-                    **{key: failure[key] for key in (*RUN_KEYS, "episode", "class")},
-                    **contact_features(samples, face if isinstance(face, str) else None),
-                }
-            )
-    return pd.DataFrame(rows, columns=[*RUN_KEYS, "episode", "class", *FEATURE_NAMES])
-
-
-def _run_trajectories(results: Results, run_id: str) -> dict[int, pd.DataFrame]:
-    """Every stored trajectory of a run by episode, samples in time order."""
-    folder = results.run_directory(run_id) / "trajectories"
-    if not any(folder.glob("*.parquet")):
-        return {}
-    stored = pd.read_parquet(folder, columns=list(TRAJECTORY_FEATURE_COLUMNS))
-    stored = stored.sort_values(["episode", "time"], kind="stable")
-    return {int(episode): samples for episode, samples in stored.groupby("episode", sort=False)}
+    parts = []
+    for run_id, group in results.failures.groupby("run_id", sort=False):
+        folder = results.run_directory(str(run_id)) / "trajectories"
+        if not any(folder.glob("*.parquet")):
+            continue  # a run recorded without trajectories
+        stored = pd.read_parquet(folder, columns=list(TRAJECTORY_FEATURE_COLUMNS))
+        stored = stored.sort_values(["episode", "time"], kind="stable")
+        faces = group.set_index("episode")["contact_face"]
+        features = trajectory_features(stored, faces.where(faces.notna(), None))
+        keys = group[[*RUN_KEYS, "episode", "class"]]
+        parts.append(keys.join(features, on="episode", how="inner"))
+    if not parts:
+        return pd.DataFrame(columns=[*RUN_KEYS, "episode", "class", *FEATURE_NAMES])
+    return pd.concat(parts).sort_index().reset_index(drop=True)
 
 
 def standardised(features: pd.DataFrame) -> NDArray[np.float64]:
@@ -204,6 +211,7 @@ def cluster_labels(
     min_cluster_size: int | None = None,
     max_clusters: int = 10,
     random_state: int = 0,
+    most: int = MOST_CLUSTERED,
 ) -> NDArray[np.int64]:
     """The cluster of every point: 0 for the largest cluster, 1 for the next, ...; -1 for a
     point HDBSCAN leaves unclustered (noise).
@@ -213,21 +221,31 @@ def cluster_labels(
         method: ``hdbscan``, or ``kmeans`` with the number of clusters (2 to
             ``max_clusters``) of the best silhouette.
         min_cluster_size: HDBSCAN's smallest cluster (default:
-            :func:`default_min_cluster_size`).
+            :func:`default_min_cluster_size` of the points clustered).
         max_clusters: The most clusters k-means tries.
-        random_state: Seeds k-means and the silhouette's sample.
+        random_state: Seeds k-means, the silhouette's sample and the sample of ``most``.
+        most: Cluster a sample of this many points at most; every other point joins the
+            cluster of its nearest sampled point.
     """
     count = len(points)
     if count < FEWEST_TO_SPLIT or _distinct(points) < 2:
         return np.zeros(count, dtype=np.int64)
+    chosen = np.arange(count)
+    if count > most:
+        chosen = np.sort(np.random.default_rng(random_state).choice(count, most, replace=False))
+    sample = points[chosen]
     if method == "hdbscan":
-        smallest = min_cluster_size or default_min_cluster_size(count)
-        labels = HDBSCAN(min_cluster_size=smallest, copy=True).fit_predict(points)
+        smallest = min_cluster_size or default_min_cluster_size(len(sample))
+        labels = HDBSCAN(min_cluster_size=smallest, copy=True).fit_predict(sample)
     elif method == "kmeans":
-        labels = _best_kmeans(points, max_clusters, random_state)
+        labels = _best_kmeans(sample, max_clusters, random_state)
     else:
         raise ValueError(f"unknown clustering method {method!r}: hdbscan or kmeans")
-    return _by_size(np.asarray(labels, dtype=np.int64))
+    labels = np.asarray(labels, dtype=np.int64)
+    if len(sample) < count:
+        nearest = NearestNeighbors(n_neighbors=1).fit(sample).kneighbors(points)[1][:, 0]
+        labels = labels[nearest]
+    return _by_size(labels)
 
 
 def _best_kmeans(

@@ -207,9 +207,9 @@ def failure_clusters_figure(embedded: pd.DataFrame, path: Path, axis_name: str =
     """The failures of each (scenario, field) case in a 2-D embedding of their features
     (``diversity.embed``), coloured by class, one marker per cluster with its id at the
     cluster's median (``diversity.cluster_failures``)."""
-    classes = sorted(embedded["class"].unique())
-    palette = colormaps["tab10" if len(classes) <= 10 else "tab20"]
-    colours = {name: palette(index % palette.N) for index, name in enumerate(classes)}
+    names = sorted(embedded["class"].unique())
+    palette = colormaps["tab10" if len(names) <= 10 else "tab20"]
+    colours = {name: palette(index % palette.N) for index, name in enumerate(names)}
     figure = Figure(dpi=100)
     for scenario, field, ax in _case_panels(figure, embedded, width=4.6, height=4.0):
         case = embedded[(embedded["scenario"] == scenario) & (embedded["field"] == field)]
@@ -235,11 +235,9 @@ def failure_clusters_figure(embedded: pd.DataFrame, path: Path, axis_name: str =
                 va="center",
                 bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7},
             )
-        clusters = case.loc[case["cluster"] >= 0, "cluster"].nunique()
-        ax.set_title(
-            f"{scenario} / field {field}: {case['class'].nunique()} classes, {clusters} clusters",
-            fontsize=9,
-        )
+        classes = _count(case["class"].nunique(), "class", "classes")
+        clusters = _count(case.loc[case["cluster"] >= 0, "cluster"].nunique(), "cluster")
+        ax.set_title(f"{scenario} / field {field}: {classes}, {clusters}", fontsize=9)
         ax.set_xlabel(f"{axis_name} 1")
         ax.set_ylabel(f"{axis_name} 2")
         if not case.empty:
@@ -249,3 +247,7 @@ def failure_clusters_figure(embedded: pd.DataFrame, path: Path, axis_name: str =
             ]
             ax.legend(handles=handles, fontsize=6, loc="best", title="class", title_fontsize=7)
     return _save(figure, path)
+
+
+def _count(number: int, one: str, many: str = "") -> str:
+    return f"{number} {one if number == 1 else many or one + 's'}"
