@@ -178,9 +178,11 @@ def test_the_smallest_cluster_grows_with_the_failures():
     assert sizes == [3, 5, 5, 16, 50]
 
 
-def test_the_embedding_is_two_dimensional_and_the_same_every_time(tmp_path):
+@pytest.mark.parametrize("method", ["pca", "tsne"])
+def test_the_embedding_is_two_dimensional_and_the_same_every_time(tmp_path, method):
     features = diversity.failure_features(two_groups(tmp_path))
-    first, again = diversity.embed(features), diversity.embed(features)
+    first = diversity.embed(features, method=method)
+    again = diversity.embed(features, method=method)
     assert first[["x", "y"]].notna().all().all()
     assert first["x"].std() > 0
     assert first[["x", "y"]].equals(again[["x", "y"]])

@@ -266,8 +266,18 @@ def _clusters(report: _Report, results: Results) -> None:
         "Failures in the plane of the first two principal components of their features, "
         "coloured by class; the marker and the number show the cluster, a cross: unclustered",
     )
-    report.table(section, "clusters", diversity.clusters_against_classes(features))
-    report.table(section, "clusters_vs_classes", diversity.contingency_table(clustered))
+    report.table(
+        section,
+        "clusters",
+        diversity.clusters_against_classes(features),
+        "Clusters beside classes, per case and tester",
+    )
+    report.table(
+        section,
+        "clusters_vs_classes",
+        diversity.contingency_table(clustered),
+        "Failures of each class (row) in each cluster (column) of its case",
+    )
 
 
 def _reward_hacking(report: _Report, results: Results) -> None:
