@@ -9,7 +9,7 @@ from tests.helpers import hazardhunt
 CAMPAIGN = """
 scenarios = ["overtaking"]
 fields = ["none", "2m"]
-testers = ["ppo-acc", "ppo-max", "random"]
+testers = ["ppo-acc", "ppo-max", "random", "qd"]
 seeds = [0]
 episodes = 16
 
@@ -20,13 +20,17 @@ batch_size = 32
 [tester.ppo-max]
 n_steps = 64
 batch_size = 32
+
+[tester.qd]
+emitters = 2
+batch_size = 4
 """
 """Without a field humans collide within a few episodes; with the 2 m field they loiter."""
 
 
 @pytest.fixture(scope="session")
 def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A finished campaign directory of ``CAMPAIGN`` (6 runs x 16 episodes)."""
+    """A finished campaign directory of ``CAMPAIGN`` (8 runs x 16 episodes)."""
     folder = tmp_path_factory.mktemp("report-campaign")
     (folder / "campaign.toml").write_text(CAMPAIGN)
     out = folder / "campaign"

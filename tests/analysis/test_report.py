@@ -17,6 +17,9 @@ from tests.helpers import hazardhunt
 TABLES = (
     "failures_per_run",
     "classes",
+    "class_discovery",
+    "clusters",
+    "clusters_vs_classes",
     "lesson_1",
     "lesson_2",
     "failures_per_class",
@@ -84,6 +87,8 @@ def test_the_figures_are_pictures(report):
     names = {path.name for path in (report / "figures").iterdir()}
     for expected in (
         "failures_per_run.png",
+        "class_discovery.png",
+        "failure_clusters.png",
         "learning_curves.png",
         "failure_rates.png",
         "heat_map_overtaking.png",
@@ -111,10 +116,12 @@ def test_each_class_found_has_a_representative_that_replays(campaign, report):
 
 def test_the_page_has_every_section_with_its_figures_inlined(report):
     page = (report / "index.html").read_text()
-    assert page.count("data:image/png;base64,") >= 5
+    assert page.count("data:image/png;base64,") >= 7
     for title in (
         "Failures per run",
         "Table I",
+        "Diversity: classes found against episodes",
+        "Diversity beyond the taxonomy: clusters",
         "Lesson 1",
         "Table II",
         "reward hacking",
@@ -126,6 +133,38 @@ def test_the_page_has_every_section_with_its_figures_inlined(report):
         assert title in page
 
 
+def test_the_diversity_sections_follow_the_classes_found(report):
+    page = (report / "index.html").read_text()
+    order = [
+        page.index("<h2>Failure classes found (Table I)"),
+        page.index("<h2>Diversity: classes found against episodes"),
+        page.index("<h2>Diversity beyond the taxonomy: clusters"),
+        page.index("<h2>Lesson 2"),
+    ]
+    assert order == sorted(order)
+
+
+def test_the_quality_diversity_archives_are_drawn(campaign, report):
+    page = (report / "index.html").read_text()
+    assert "Quality-diversity archives" in page
+    for field in ("none", "2m"):
+        picture = report / "figures" / f"archive_overtaking__{field}__qd__seed0.png"
+        assert picture.stat().st_size > 10_000
+        assert f"The archive of overtaking__{field}__qd__seed0" in page
+
+
+def test_the_cluster_tables_count_every_failure_once(campaign, report):
+    failures = load_results(campaign).failures
+    per_case = failures.groupby(["scenario", "field"]).size()
+    clusters = pd.read_csv(report / "tables" / "clusters.csv")
+    everyone = clusters[(clusters["tester"] == "all") & (clusters["scenario"] != "all")]
+    assert everyone.set_index(["scenario", "field"])["failures"].to_dict() == per_case.to_dict()
+    contingency = pd.read_csv(report / "tables" / "clusters_vs_classes.csv")
+    cells = contingency.set_index(["scenario", "field", "class"]).fillna(0).sum(axis=1)
+    per_class = failures.groupby(["scenario", "field", "class"]).size()
+    assert cells.astype(int).to_dict() == per_class.to_dict()
+
+
 def test_a_partly_finished_campaign_reports_its_finished_runs(campaign, tmp_path):
     copy = tmp_path / "campaign"
     shutil.copytree(campaign, copy, ignore=shutil.ignore_patterns("report"))
@@ -133,7 +172,7 @@ def test_a_partly_finished_campaign_reports_its_finished_runs(campaign, tmp_path
     (unfinished / "summary.json").unlink()
     results = load_results(copy)
     assert results.unfinished == [unfinished.name]
-    assert len(results.runs) == 5
+    assert len(results.runs) == len(list((copy / "runs").iterdir())) - 1
     assert unfinished.name not in set(results.episodes["run_id"])
 
 

@@ -18,6 +18,9 @@ import pytest
 TABLES = [
     "failures_per_run",
     "classes",
+    "class_discovery",
+    "clusters",
+    "clusters_vs_classes",
     "lesson_1",
     "runtime",
     "reward_hacking",
@@ -26,8 +29,9 @@ TABLES = [
 ]
 """Tables the campaign's report must show, by the name in ``id="table-NAME"``."""
 
-MIN_IMAGES = 5
-"""The bar chart, loitering, learning curves, heat map, rates, and a picture per class."""
+MIN_IMAGES = 7
+"""The bar chart, classes against episodes, clusters, loitering, learning curves, heat map,
+rates, and a picture per class."""
 
 CHECK = """
 <script>

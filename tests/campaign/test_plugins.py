@@ -119,6 +119,25 @@ def test_a_campaign_file_with_a_bad_controller_names_the_file_and_key(tmp_path):
         load_campaign(campaign)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("tester", "params"),
+    [("cem", ["population=2", "n_workers=2"]), ("ppo-max", ["n_envs=2", "n_steps=8"])],
+)
+def test_worker_processes_load_a_controller_found_only_in_the_working_directory(
+    tmp_path, tester, params
+):
+    plugin_module(tmp_path, RAISING)
+    out = tmp_path / "run"
+    options = [item for param in params for item in ("--tester-param", param)]
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", tester, *options,
+        "--episodes", 4, "--out", out, "--json", "--controller", "my_sut:Raising", cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["sut_errors"] == 4  # the plug-in ran in the workers
+
+
 def test_a_controller_that_raises_is_a_recorded_sut_error(tmp_path):
     plugin_module(tmp_path, RAISING)
     out = tmp_path / "run"

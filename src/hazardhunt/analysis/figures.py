@@ -6,7 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib import colormaps
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
+from matplotlib.ticker import MaxNLocator
 
 from hazardhunt.env.rendering import draw_floor
 from hazardhunt.testers.registry import colour_of, sort_testers
@@ -148,4 +153,135 @@ def failure_rates_figure(rates: pd.DataFrame, path: Path) -> Path:
     ax.set_yticks(positions, labels, fontsize=7)
     ax.set_xlabel("failures per 100 episodes (95 % Clopper-Pearson interval)")
     ax.set_xlim(left=0)
+    return _save(figure, path)
+
+
+CLUSTER_MARKERS = "osD^v<>phP*X"
+"""One marker per cluster id (cycled); unclustered failures are small crosses."""
+
+
+def _case_panels(
+    figure: Figure, frame: pd.DataFrame, width: float = 4.2, height: float = 3.4
+) -> list[tuple[str, str, Axes]]:
+    """One panel per (scenario, field) case of ``frame``: scenarios down, fields across."""
+    scenarios = sorted(frame["scenario"].unique()) or ["(none)"]
+    fields = _ordered_fields(frame["field"]) or ["(none)"]
+    figure.set_size_inches(width * len(fields), height * len(scenarios))
+    panels = []
+    for row, scenario in enumerate(scenarios):
+        for column, field in enumerate(fields):
+            ax = figure.add_subplot(len(scenarios), len(fields), row * len(fields) + column + 1)
+            ax.set_title(f"{scenario} / field {field}", fontsize=9)
+            panels.append((scenario, field, ax))
+    return panels
+
+
+def class_discovery_figure(curves: pd.DataFrame, path: Path) -> Path:
+    """Distinct classes found against episodes played, one step curve per tester, one panel
+    per (scenario, field) case (``tables.class_discovery_curves``)."""
+    figure = Figure(dpi=100)
+    for scenario, field, ax in _case_panels(figure, curves):
+        case = curves[(curves["scenario"] == scenario) & (curves["field"] == field)]
+        for tester in sort_testers(case["tester"]):
+            group = case[case["tester"] == tester]
+            ax.step(
+                group["episodes"],
+                group["classes found"],
+                where="post",
+                color=colour_of(str(tester)),
+                label=str(tester),
+            )
+        ax.set_xlabel("episodes played")
+        ax.set_ylabel("classes found")
+        ax.set_xlim(left=0)
+        ax.set_ylim(bottom=0)
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        if not case.empty:
+            ax.legend(fontsize=8, loc="lower right")
+    return _save(figure, path)
+
+
+def failure_clusters_figure(embedded: pd.DataFrame, path: Path, axis_name: str = "PCA") -> Path:
+    """The failures of each (scenario, field) case in a 2-D embedding of their features
+    (``diversity.embed``), coloured by class, one marker per cluster with its id at the
+    cluster's median (``diversity.cluster_failures``)."""
+    names = sorted(embedded["class"].unique())
+    palette = colormaps["tab10" if len(names) <= 10 else "tab20"]
+    colours = {name: palette(index % palette.N) for index, name in enumerate(names)}
+    figure = Figure(dpi=100)
+    for scenario, field, ax in _case_panels(figure, embedded, width=4.6, height=4.0):
+        case = embedded[(embedded["scenario"] == scenario) & (embedded["field"] == field)]
+        for cluster, points in case.groupby("cluster", sort=True):
+            clustered = cluster >= 0
+            ax.scatter(
+                points["x"],
+                points["y"],
+                s=22 if clustered else 12,
+                marker=CLUSTER_MARKERS[cluster % len(CLUSTER_MARKERS)] if clustered else "x",
+                color=[colours[name] for name in points["class"]],
+                alpha=0.75,
+                linewidths=0.8,
+            )
+        for cluster, points in case[case["cluster"] >= 0].groupby("cluster", sort=True):
+            ax.text(
+                points["x"].median(),
+                points["y"].median(),
+                str(cluster),
+                fontsize=10,
+                fontweight="bold",
+                ha="center",
+                va="center",
+                bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7},
+            )
+        classes = _count(case["class"].nunique(), "class", "classes")
+        clusters = _count(case.loc[case["cluster"] >= 0, "cluster"].nunique(), "cluster")
+        ax.set_title(f"{scenario} / field {field}: {classes}, {clusters}", fontsize=9)
+        ax.set_xlabel(f"{axis_name} 1")
+        ax.set_ylabel(f"{axis_name} 2")
+        if not case.empty:
+            handles = [
+                Line2D([], [], marker="o", linestyle="", color=colours[name], label=str(name))
+                for name in sorted(case["class"].unique())
+            ]
+            ax.legend(handles=handles, fontsize=6, loc="best", title="class", title_fontsize=7)
+    return _save(figure, path)
+
+
+def _count(number: int, one: str, many: str = "") -> str:
+    return f"{number} {one if number == 1 else many or one + 's'}"
+
+
+def archive_heat_map(archive: pd.DataFrame, path: Path, title: str) -> Path:
+    """A quality-diversity archive (``tester/archive.parquet``) as a heat map over the bearing
+    of the contact or closest approach and the robot's speed there: each cell the best episode's
+    maximum risk over the archive's other axes; cells holding a failure (risk >= 100) framed."""
+    bearing_edges = np.linspace(-180.0, 180.0, 13)
+    speed_edges = np.linspace(0.0, max(1.2, float(archive["robot_speed"].max())), 7)
+    best = np.full((len(speed_edges) - 1, len(bearing_edges) - 1), np.nan)
+    degrees = np.degrees(archive["bearing"].to_numpy())
+    columns = np.clip(np.digitize(degrees, bearing_edges) - 1, 0, best.shape[1] - 1)
+    rows = np.clip(np.digitize(archive["robot_speed"], speed_edges) - 1, 0, best.shape[0] - 1)
+    for row, column, objective in zip(rows, columns, archive["objective"], strict=True):
+        best[row, column] = np.fmax(best[row, column], objective)
+    figure = Figure(figsize=(7.0, 3.4), dpi=100)
+    ax = figure.add_subplot()
+    # Risk spans near misses (below 1) and collisions (100 to 200): a log scale shows both.
+    shown = ax.pcolormesh(
+        bearing_edges, speed_edges, np.log10(np.maximum(best, 1e-3)), cmap="magma", shading="flat"
+    )
+    for row, column in zip(*np.nonzero(best >= 100.0), strict=True):
+        ax.add_patch(
+            Rectangle(
+                (bearing_edges[column], speed_edges[row]),
+                bearing_edges[column + 1] - bearing_edges[column],
+                speed_edges[row + 1] - speed_edges[row],
+                fill=False,
+                edgecolor="#2ca02c",
+                linewidth=2,
+            )
+        )
+    figure.colorbar(shown, ax=ax, label="log10 of the maximum risk")
+    ax.set_xlabel("bearing around the robot (deg; 0 ahead, 90 left)")
+    ax.set_ylabel("robot speed (m/s)")
+    ax.set_title(title, fontsize=9)
     return _save(figure, path)

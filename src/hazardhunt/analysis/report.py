@@ -23,7 +23,7 @@ from typing import Any
 import pandas as pd
 
 import hazardhunt
-from hazardhunt.analysis import figures, tables
+from hazardhunt.analysis import diversity, figures, tables
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
@@ -121,8 +121,16 @@ def write_report(
     report.directory.mkdir(exist_ok=True)
     tell("failures per run")
     _failures_per_run(report, results)
-    tell("failure classes and lessons")
-    _table_sections(report, results)
+    tell("failure classes")
+    _table_sections(report, results, TABLE_SECTIONS[:1])
+    tell("classes found against episodes")
+    _class_discovery(report, results)
+    tell("clusters of failures")
+    _clusters(report, results)
+    tell("quality-diversity archives")
+    _archives(report, results)
+    tell("lessons")
+    _table_sections(report, results, TABLE_SECTIONS[1:])
     tell("reward hacking")
     _reward_hacking(report, results)
     tell("learning curves and heat maps")
@@ -200,9 +208,103 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
 the results and the tables before it, by name)."""
 
 
-def _table_sections(report: _Report, results: Results) -> None:
-    for title, intro, name, compute in TABLE_SECTIONS:
+def _table_sections(
+    report: _Report,
+    results: Results,
+    sections: tuple[tuple[str, str, str, TableSource], ...],
+) -> None:
+    for title, intro, name, compute in sections:
         report.table(report.section(title, intro), name, compute(results, report.tables))
+
+
+def _class_discovery(report: _Report, results: Results) -> None:
+    section = report.section(
+        "Diversity: classes found against episodes",
+        "Distinct failure classes found against the episodes played, per tester and "
+        "(scenario, field) case, seeds pooled and 'other' not counted, as in Table I: a curve "
+        "that rises early found the classes early. The table gives the episode at which each "
+        "tester first found each class (its index in the run, the earliest over the seeds; "
+        "blank: never found).",
+    )
+    discovery = tables.class_discovery(results.failures)
+    curves = tables.class_discovery_curves(discovery, results.runs)
+    path = figures.class_discovery_figure(curves, report.figures / "class_discovery.png")
+    report.image(section, path, "Distinct classes found against episodes played")
+    report.table(
+        section,
+        "class_discovery",
+        tables.class_first_found(discovery),
+        "Episode at which each class was first found, per tester",
+    )
+
+
+def _archives(report: _Report, results: Results) -> None:
+    """The archive of every quality-diversity run (``tester/archive.parquet``), if any."""
+    found = [
+        (str(run_id), Path(directory) / "tester" / "archive.parquet")
+        for run_id, directory in zip(results.runs["run_id"], results.runs["directory"], strict=True)
+    ]
+    archives = [(run_id, path) for run_id, path in found if path.is_file()]
+    if not archives:
+        return
+    section = report.section(
+        "Quality-diversity archives",
+        "The archive each quality-diversity run kept (docs/search-methods.md): for every "
+        "bearing of the contact or closest approach around the robot and every robot speed "
+        "there, the largest risk an episode reached (over the archive's other axes); framed "
+        "cells hold a failure. Empty cells were never reached.",
+    )
+    for run_id, path in archives:
+        picture = figures.archive_heat_map(
+            pd.read_parquet(path), report.figures / f"archive_{_file_name(run_id)}.png", run_id
+        )
+        report.image(section, picture, f"The archive of {run_id}")
+
+
+def _clusters(report: _Report, results: Results) -> None:
+    section = report.section(
+        "Diversity beyond the taxonomy: clusters",
+        "Failures clustered on features of their trajectories alone (where around the robot "
+        "the contact was, the face touched, the human's velocity relative to the robot, the "
+        "robot's speed, the safety layer's stops and releases, the time and place of the "
+        "contact; standardised), with HDBSCAN, each (scenario, field) case on its own, testers "
+        "and seeds pooled (docs/failure-classes.md). The first table counts the clusters "
+        "beside the classes ('other' included); a tester's row counts the clusters of its "
+        "case its failures fall in; 'unclustered' failures fit no cluster. The adjusted Rand "
+        "index is 1 when clusters and classes split the clustered failures alike and about 0 "
+        "when they are unrelated. The second table counts the failures of each class in each "
+        "cluster: a class spread over several clusters holds failures the data tells apart; "
+        "a cluster spread over several classes was split by the taxonomy only.",
+    )
+    features = diversity.failure_features(results)
+    if features.empty:
+        recorded = not results.failures.empty
+        section.parts.append(
+            "<p>No failure's trajectory is stored.</p>"
+            if recorded
+            else "<p>No failure was recorded.</p>"
+        )
+        return
+    clustered = diversity.embed(diversity.cluster_failures(features))
+    path = figures.failure_clusters_figure(clustered, report.figures / "failure_clusters.png")
+    report.image(
+        section,
+        path,
+        "Failures in the plane of the first two principal components of their features, "
+        "coloured by class; the marker and the number show the cluster, a cross: unclustered",
+    )
+    report.table(
+        section,
+        "clusters",
+        diversity.clusters_against_classes(features),
+        "Clusters beside classes, per case and tester",
+    )
+    report.table(
+        section,
+        "clusters_vs_classes",
+        diversity.contingency_table(clustered),
+        "Failures of each class (row) in each cluster (column) of its case",
+    )
 
 
 def _reward_hacking(report: _Report, results: Results) -> None:

@@ -291,3 +291,59 @@ def typical_loitering(loitering: pd.DataFrame) -> pd.Series | None:
 def _hours_minutes(seconds: float) -> str:
     minutes = round(seconds / 60.0)
     return f"{minutes // 60}:{minutes % 60:02d}"
+
+
+def class_discovery(failures: pd.DataFrame) -> pd.DataFrame:
+    """When each tester first found each class, per (scenario, field) case: the earliest
+    ``episode`` over the seeds (its index in the run, as ``hazardhunt replay`` takes it) and the
+    ``seed`` of that run; one row per class found, in the order found."""
+    columns = ["scenario", "field", "tester", "class", "episode", "seed"]
+    if failures.empty or "class" not in failures:
+        return pd.DataFrame(columns=columns)
+    earliest = failures.sort_values(["episode", "seed"], kind="stable")
+    first = earliest.groupby(["scenario", "field", "tester", "class"], sort=False).head(1)
+    first = first.sort_values(["scenario", "field", "tester", "episode", "class"])
+    return first[columns].reset_index(drop=True)
+
+
+def class_discovery_curves(discovery: pd.DataFrame, runs: pd.DataFrame) -> pd.DataFrame:
+    """Distinct classes found against episodes played, per case and tester (seeds pooled and
+    ``other`` not counted, as in Table I): one row per step of the curve, from 0 episodes to
+    the budget (the longest run of the case and tester)."""
+    rows = []
+    for (scenario, field, tester), group in runs.groupby(["scenario", "field", "tester"]):
+        keys = {"scenario": scenario, "field": field, "tester": tester}
+        found = discovery[
+            (discovery["scenario"] == scenario)
+            & (discovery["field"] == field)
+            & (discovery["tester"] == tester)
+            & (discovery["class"] != OTHER)
+        ]
+        steps = (found["episode"].astype(int) + 1).value_counts().sort_index().cumsum()
+        rows.append(keys | {"episodes": 0, "classes found": 0})
+        rows += [
+            keys | {"episodes": int(played), "classes found": int(count)}
+            for played, count in steps.items()
+        ]
+        rows.append(keys | {"episodes": int(group["episodes"].max()), "classes found": len(found)})
+    return pd.DataFrame(rows, columns=["scenario", "field", "tester", "episodes", "classes found"])
+
+
+def class_first_found(discovery: pd.DataFrame) -> pd.DataFrame:
+    """The episode at which each tester first found each class (from ``class_discovery``):
+    one row per (scenario, field, class), one column per tester, blank where the tester never
+    found it; the classes of a case in the order any tester first found them."""
+    if discovery.empty:
+        return pd.DataFrame(columns=["scenario", "field", "class"])
+    wide = discovery.pivot_table(
+        index=["scenario", "field", "class"], columns="tester", values="episode", aggfunc="min"
+    )
+    earliest = wide.min(axis=1).rename("earliest")
+    wide = wide.join(earliest).reset_index()
+    wide = wide.sort_values(["scenario", "field", "earliest", "class"]).drop(columns="earliest")
+    testers = [c for c in wide.columns if c not in ("scenario", "field", "class")]
+    for tester in testers:  # whole episode numbers, not floats with a blank as NaN
+        wide[tester] = [
+            "" if pd.isna(value) else int(value) for value in wide[tester].astype(float)
+        ]
+    return wide.reset_index(drop=True).rename_axis(columns=None)

@@ -12,6 +12,7 @@ Three ways to execute a run, from the outside in:
 
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import shutil
@@ -150,7 +151,11 @@ def record_run(
             elapsed = time.perf_counter() - clock
             progress(RunProgress(record.episode + 1, config.episodes, store.failure_count, elapsed))
 
-    recorder = EpisodeRecorder(AGVEnv.wrapping(simulation, reward_of(tester)), on_episode)
+    recorder = EpisodeRecorder(
+        AGVEnv.wrapping(simulation, reward_of(tester)),
+        on_episode,
+        simulation_factory=functools.partial(simulation_of, config),
+    )
     tester.explore(recorder, config.episodes)
     tester.save(directory / "tester")
     store.close()

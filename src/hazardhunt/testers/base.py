@@ -50,10 +50,21 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         env: gym.Env[Any, Any],
         on_episode: Callable[[EpisodeRecord], None],
         keep_trajectory: Callable[[EpisodeSummary], bool] = is_failure,
+        simulation_factory: Callable[[], Simulation] | None = None,
     ) -> None:
+        """Args:
+        env: The environment (an AGVEnv, or a wrapper of one).
+        on_episode: Called with every finished episode.
+        keep_trajectory: Which episodes keep their trajectory (failures).
+        simulation_factory: Builds a copy of the simulation in a worker process (a picklable
+            callable: a run passes one that rebuilds it from the run's configuration, so that
+            a plug-in found only on the run's search path loads there too); without it,
+            workers receive a pickled copy of the simulation.
+        """
         super().__init__(env)
         self.on_episode = on_episode
         self.keep_trajectory = keep_trajectory
+        self.simulation_factory = simulation_factory
         self.episodes_done = 0
         self._pool: ProcessPoolExecutor | None = None
         self._pool_size = 0
@@ -106,7 +117,8 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
             return [self.evaluate(actions) for actions in sequences]
         if self._pool is None or self._pool_size != workers:
             self.close_pool()
-            self._pool = _episode_pool(self.simulation, self.keep_trajectory, workers)
+            source = self.simulation_factory or self.simulation
+            self._pool = _episode_pool(source, self.keep_trajectory, workers)
             self._pool_size = workers
         results = list(self._pool.map(_play_in_worker, [np.asarray(a) for a in sequences]))
         for result in results:
@@ -160,19 +172,24 @@ class Tester(Protocol):
 _worker_simulation: tuple[Simulation, Callable[[EpisodeSummary], bool]] | None = None
 
 
+SimulationSource = Simulation | Callable[[], Simulation]
+"""A simulation, or what builds one in a worker process."""
+
+
 def _episode_pool(
-    simulation: Simulation, keep_trajectory: Callable[[EpisodeSummary], bool], workers: int
+    source: SimulationSource, keep_trajectory: Callable[[EpisodeSummary], bool], workers: int
 ) -> ProcessPoolExecutor:
     return ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_start_worker,
-        initargs=(simulation, keep_trajectory),
+        initargs=(source, keep_trajectory),
     )
 
 
-def _start_worker(simulation: Simulation, keep: Callable[[EpisodeSummary], bool]) -> None:
+def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], bool]) -> None:
     global _worker_simulation
+    simulation = source if isinstance(source, Simulation) else source()
     _worker_simulation = (simulation, keep)
 
 

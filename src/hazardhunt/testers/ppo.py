@@ -214,14 +214,24 @@ class _EpisodeReporter(gym.Wrapper[Any, Any, Any, Any]):
 
 
 class _ReporterFactory:
-    """Builds a worker's env from a pickled copy of the run's env."""
+    """Builds a worker's env: from the recorder's simulation factory when it has one (plug-ins
+    then load from the run's search path in the worker too), else from a pickled copy of the
+    run's env."""
 
     def __init__(self, recorder: EpisodeRecorder) -> None:
-        self.env = recorder.env.unwrapped
+        agv = recorder.env.unwrapped
+        assert isinstance(agv, AGVEnv)
+        self.simulation_factory = recorder.simulation_factory
+        self.env = agv if self.simulation_factory is None else None
+        self.reward: RewardKind = agv.reward_kind
         self.keep_trajectory = recorder.keep_trajectory
 
     def __call__(self) -> gym.Env[Any, Any]:
-        return _EpisodeReporter(self.env, self.keep_trajectory)
+        env = self.env
+        if env is None:
+            assert self.simulation_factory is not None
+            env = AGVEnv.wrapping(self.simulation_factory(), self.reward)
+        return _EpisodeReporter(env, self.keep_trajectory)
 
 
 class RecordingVecEnv(VecEnvWrapper):

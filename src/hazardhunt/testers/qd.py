@@ -38,11 +38,11 @@ class QualityDiversityTester:
         self,
         seed: int,
         measures: Sequence[str] = DESCRIPTOR_NAMES,
-        bins: Sequence[int] = (12, 4, 3),
+        bins: Sequence[int] = (8, 3, 3),
         algorithm: str = "cma-me",
-        emitters: int = 4,
+        emitters: int = 2,
         batch_size: int = 10,
-        sigma0: float = 0.5,
+        sigma0: float = 0.6,
         learning_rate: float = 0.02,
         n_workers: int = 1,
     ) -> None:
@@ -104,10 +104,12 @@ class QualityDiversityTester:
                 left = episodes - env.episodes_done
                 sequences = solutions[:left].reshape(-1, horizon, 2)
                 results = env.evaluate_batch(list(sequences), self.n_workers)
-                if len(results) < len(solutions):
-                    break  # the budget ends within this batch: nothing to learn from it
                 objective = [result.summary.max_risk for result in results]
                 measures = [describe(result.summary)[columns] for result in results]
+                if len(results) < len(solutions):
+                    # The budget ends within this batch: the archive keeps what it played.
+                    self.archive.add(solutions[: len(results)], objective, measures)
+                    break
                 scheduler.tell(objective, measures)
         finally:
             env.close_pool()
@@ -143,7 +145,8 @@ class QualityDiversityTester:
                 x0=np.zeros(dimension),
                 sigma0=self.sigma0,
                 ranker=ranker,
-                bounds=[(-1.0, 1.0)] * dimension,
+                # No bounds: CMA-ES would resample until a whole sequence lies in [-1, 1]; the
+                # simulation clips every action instead, as it does for any tester.
                 batch_size=self.batch_size,
                 seed=self.seed * 1000 + index,
             )
