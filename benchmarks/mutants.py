@@ -34,7 +34,7 @@ from hazardhunt.campaign.config import PluginSpec, RunConfig
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import write_json_atomic
 from hazardhunt.sut.conservative import MUTANTS, ConservativeController
-from hazardhunt.world.scenario import BUILTIN_SCENARIOS
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS, format_validation_error
 
 MODULE = "hazardhunt.sut.conservative"
 ORIGINAL = ConservativeController.__name__
@@ -79,7 +79,8 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
                                 )
                             )
                         except ValidationError as error:
-                            sys.exit(f"cannot configure {tester} on {scenario}/{field}: {error}")
+                            problem = format_validation_error(error)
+                            sys.exit(f"error: {tester} on {scenario}/{field}: {problem}")
     return grid
 
 
