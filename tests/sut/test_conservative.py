@@ -50,10 +50,16 @@ def robot_past(x: float) -> Callable[[Simulation], bool]:
     return lambda sim: sim.robot.x > x
 
 
+def robot_past_or_standing(x: float) -> Callable[[Simulation], bool]:
+    """Trigger: the robot has passed ``x``, or it stands (it stopped for the waiting human)."""
+    return lambda sim: sim.robot.x > x or (sim.sim_time > 2.0 and sim.robot.speed == 0.0)
+
+
 # ------------------------------------------------------------------ attacks on the original
 def side_attack() -> Policy:
     """Wait south of the route, run into the robot's right side as it comes abeam."""
-    return lie_in_wait((10.0, 8.8), NORTH, robot_past(9.55), lambda sim: intercept(sim, 1.5))
+    attack: Policy = lambda sim: intercept(sim, 1.5)  # noqa: E731
+    return lie_in_wait((10.0, 8.8), NORTH, robot_past_or_standing(9.55), attack)
 
 
 def charge_head_on() -> Policy:
@@ -63,13 +69,14 @@ def charge_head_on() -> Policy:
 
 def step_in_late() -> Policy:
     """Wait beside the route and step into the path when the robot's front is 1 m away."""
-    return lie_in_wait((12.0, 9.0), NORTH, robot_past(10.7), lambda sim: (1.5, 0.0))
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=0.32)  # noqa: E731
+    return lie_in_wait((12.0, 9.0), NORTH, robot_past_or_standing(10.7), attack)
 
 
 def chase_rear(speed: float) -> Policy:
     """Let the robot pass, then run after its rear at ``speed``."""
     attack: Policy = lambda sim: intercept(sim, speed, offset=-0.32)  # noqa: E731
-    return lie_in_wait((9.0, 8.8), NORTH, robot_past(10.0), attack)
+    return lie_in_wait((9.0, 8.8), NORTH, robot_past_or_standing(10.0), attack)
 
 
 def stand_beside_route() -> Policy:
@@ -165,6 +172,14 @@ ATTACKS: dict[str, Callable[[], Policy]] = {
     "stand beside the route": stand_beside_route,
     **{f"{mutant.__name__}'s killer": killer for mutant, (_, killer) in MUTANT_KILLERS.items()},
 }
+TOUCHING_ATTACKS = [
+    "side attack",
+    "charge head-on",
+    "step in late",
+    "chase the rear fast",
+    "follow the rear slowly",
+]
+"""The attacks that reach the original's body in every scenario (it stops; they walk on)."""
 
 
 # ------------------------------------------------------------------ tests
@@ -199,6 +214,15 @@ def test_with_the_human_away_the_robot_reaches_its_goal(name, field):
 def test_no_scripted_human_makes_the_original_fail(attack, name, field):
     result = run(make(name, field, ConservativeController()), ATTACKS[attack]())
     assert result.outcome != "failure", result.summary
+
+
+@pytest.mark.parametrize("field", list(FIELD_SETTINGS))
+@pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
+@pytest.mark.parametrize("attack", TOUCHING_ATTACKS)
+def test_a_human_who_reaches_the_original_meets_it_standing(attack, name, field):
+    result = run(make(name, field, ConservativeController()), ATTACKS[attack]())
+    assert result.outcome == "safe_contact"
+    assert result.summary.contact_verdict == "robot_standing"
 
 
 @pytest.mark.parametrize("field", ["none", "1.25m"])
