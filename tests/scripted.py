@@ -78,3 +78,17 @@ def lie_in_wait(
         return keep_heading(sim, facing, 0.0)
 
     return policy
+
+
+def intercept(sim: Simulation, speed: float, offset: float = 0.0) -> tuple[float, float]:
+    """Head at ``speed`` for where the robot's centre, shifted ``offset`` m along its heading
+    (+0.32 its front, -0.32 its rear), will be when the human gets there."""
+    robot = sim.robot
+    x, y, _ = sim.human_pose
+    cos_h, sin_h = math.cos(robot.heading), math.sin(robot.heading)
+    target_x, target_y, lead_time = robot.x, robot.y, 0.0
+    for _ in range(5):  # a few fixed-point steps of "where will it be when I arrive"
+        ahead = offset + robot.speed * lead_time
+        target_x, target_y = robot.x + ahead * cos_h, robot.y + ahead * sin_h
+        lead_time = math.hypot(target_x - x, target_y - y) / speed
+    return steer_towards(sim, (target_x, target_y), speed)
