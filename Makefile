@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 OUT ?= demo-output
 WORKERS ?= 2
 
-.PHONY: install browser demo test test-slow test-all lint format type bench clean
+.PHONY: install browser demo test test-slow test-all lint format type bench peers clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,6 +61,22 @@ type: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/throughput.py
+
+# Off-the-shelf search methods beside hazardhunt's testers (benchmarks/peers/README.md), in
+# their own venv: VerifAI's pins conflict with hazardhunt's.
+PEERS_VENV ?= $(abspath ../peers-venv)
+PEERS_STAMP := $(PEERS_VENV)/.installed
+PEERS_ARGS ?=
+
+$(PEERS_STAMP): benchmarks/peers/requirements.txt pyproject.toml
+	$(PYTHON) -m venv $(PEERS_VENV)
+	$(PEERS_VENV)/bin/pip install --quiet --upgrade pip
+	$(PEERS_VENV)/bin/pip install --quiet -r benchmarks/peers/requirements.txt
+	$(PEERS_VENV)/bin/pip install --quiet --no-deps -e .
+	touch $(PEERS_STAMP)
+
+peers: $(STAMP) $(PEERS_STAMP)
+	$(PEERS_VENV)/bin/python benchmarks/peers/peers.py --hazardhunt $(BIN)/hazardhunt $(PEERS_ARGS)
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .mypy_cache .ruff_cache
