@@ -1,6 +1,7 @@
 """The `hazardhunt run` command: smoke run, JSON summary, bad input."""
 
 import json
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -91,3 +92,16 @@ def test_out_must_not_hold_something_else(tmp_path):
     assert done.returncode == 2
     assert "is not a finished run" in done.stderr
     assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_the_scenarios_command_draws_a_scenario_file_with_a_field_it_defines(tmp_path):
+    dock = Path(__file__).parents[2] / "examples" / "loading_dock" / "dock_crossing.toml"
+    done = hazardhunt("scenarios", dock, "--field", "sides", "--out", tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "dock_crossing.png").stat().st_size > 10_000
+
+
+def test_the_scenarios_command_names_the_fields_there_are(tmp_path):
+    done = hazardhunt("scenarios", "crossing", "--field", "wide", "--out", tmp_path)
+    assert done.returncode == 2
+    assert "unknown field 'wide': use one of none, 1.25m, 2m" in done.stderr

@@ -142,7 +142,7 @@ class LaserSafetyLayer:
         self.field = FieldShape(diameter, side_margin, response_time)
         self.robot = robot
         self.standstill_speed = standstill_speed
-        self._stopping = False
+        self._emergency_stop = False
         self._violated_at: float | None = None
 
     @classmethod
@@ -152,7 +152,7 @@ class LaserSafetyLayer:
 
     def reset(self) -> None:
         """Release any stop."""
-        self._stopping = False
+        self._emergency_stop = False
         self._violated_at = None
 
     def human_in_field(self, robot: RobotState, human_position: FloatArray, radius: float) -> bool:
@@ -186,13 +186,13 @@ class LaserSafetyLayer:
         until the robot stands and the field is free.
         """
         in_field = self.human_in_field(robot, human_position, radius)
-        if in_field and self._violated_at is None and not self._stopping:
+        if in_field and self._violated_at is None and not self._emergency_stop:
             self._violated_at = time
         if self._violated_at is not None and (
             time - self._violated_at >= self.field.response_time - 1e-9
         ):
-            self._stopping = True
+            self._emergency_stop = True
             self._violated_at = None
-        elif self._stopping and not in_field and robot.speed <= self.standstill_speed:
-            self._stopping = False
-        return _STATUSES[self._stopping, in_field]
+        elif self._emergency_stop and not in_field and robot.speed <= self.standstill_speed:
+            self._emergency_stop = False
+        return _STATUSES[self._emergency_stop, in_field]
