@@ -41,7 +41,7 @@ demo: $(STAMP)
 test: $(STAMP) browser
 	$(BIN)/pytest -q
 
-test-slow: $(STAMP)
+test-slow: $(STAMP) browser
 	$(BIN)/pytest -q -m slow
 
 test-all: $(STAMP) browser

@@ -14,6 +14,9 @@ from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
 from tests.helpers import hazardhunt
 
+# Slow: a small campaign and its report, built once (about a minute); `make test-slow` runs it.
+pytestmark = pytest.mark.slow
+
 TABLES = (
     "failures_per_run",
     "classes",

@@ -15,6 +15,9 @@ from typing import Any
 
 import pytest
 
+# Slow: the same campaign's report in a real browser; CI runs it with `make test-slow`.
+pytestmark = pytest.mark.slow
+
 TABLES = [
     "failures_per_run",
     "classes",
