@@ -64,18 +64,18 @@ class CrossEntropyTester:
             ValueError: A parameter out of its range.
         """
         checks = {
-            "population": population >= 2,
-            "elite_fraction": 0.0 < elite_fraction <= 1.0,
-            "smoothing": 0.0 < smoothing <= 1.0,
-            "initial_std": initial_std > 0.0,
-            "min_std": min_std >= 0.0,
-            "patience": patience >= 1,
-            "novelty_radius": novelty_radius > 0.0,
-            "n_workers": n_workers >= 1,
+            "population": (population, population >= 2),
+            "elite_fraction": (elite_fraction, 0.0 < elite_fraction <= 1.0),
+            "smoothing": (smoothing, 0.0 < smoothing <= 1.0),
+            "initial_std": (initial_std, initial_std > 0.0),
+            "min_std": (min_std, min_std >= 0.0),
+            "patience": (patience, patience >= 1),
+            "novelty_radius": (novelty_radius, novelty_radius > 0.0),
+            "n_workers": (n_workers, n_workers >= 1),
         }
-        for key, ok in checks.items():
+        for key, (value, ok) in checks.items():
             if not ok:
-                raise ValueError(f"tester 'cem': {key} is out of range: {locals()[key]!r}")
+                raise ValueError(f"tester 'cem': {key} is out of range: {value!r}")
         self.seed = seed
         self.population = population
         self.elites = max(1, round(elite_fraction * population))
