@@ -4,16 +4,22 @@ import numpy as np
 import pytest
 
 from hazardhunt.world.geometry import (
-    disc_rectangle_clearance,
     distances_to_segments,
     point_half_disc_distance,
     point_in_polygon,
+    point_rectangle_clearance,
     rectangle_corners,
     rectangle_face,
     to_body_frame,
 )
 
 LENGTH, WIDTH = 0.64, 0.5
+
+
+def disc_clearance(center, x=0.0, y=0.0, heading=0.0, radius=0.25):
+    """Clearance between a human disc at ``center`` and the robot's rectangle at (x, y)."""
+    forward, left = to_body_frame(np.array(center), x, y, heading)
+    return point_rectangle_clearance(forward, left, LENGTH, WIDTH) - radius
 
 
 @pytest.mark.parametrize(
@@ -26,16 +32,12 @@ LENGTH, WIDTH = 0.64, 0.5
     ],
 )
 def test_disc_rectangle_clearance_matches_hand_computation(center, expected):
-    assert disc_rectangle_clearance(np.array(center), 0.25, 0, 0, 0, LENGTH, WIDTH) == (
-        pytest.approx(expected)
-    )
+    assert disc_clearance(center) == pytest.approx(expected)
 
 
 def test_clearance_follows_the_robot_heading():
     # Robot facing north: a human 1 m north is in front of it, 0.43 m from its front face.
-    clearance = disc_rectangle_clearance(
-        np.array([5.0, 6.0]), 0.25, 5.0, 5.0, math.pi / 2, LENGTH, WIDTH
-    )
+    clearance = disc_clearance([5.0, 6.0], 5.0, 5.0, math.pi / 2)
     assert clearance == pytest.approx(1.0 - 0.32 - 0.25)
     forward, left = to_body_frame(np.array([5.0, 6.0]), 5.0, 5.0, math.pi / 2)
     assert (forward, left) == pytest.approx((1.0, 0.0))

@@ -32,7 +32,6 @@ from hazardhunt.sut.safety_layer import FieldShape, LaserSafetyLayer, field_shap
 from hazardhunt.sut.tracking import HumanTracker
 from hazardhunt.world.bodies import HumanParams, RobotParams, RobotState
 from hazardhunt.world.geometry import (
-    disc_rectangle_clearance,
     point_rectangle_clearance,
     rectangle_face,
     to_body_frame,
@@ -240,15 +239,13 @@ class Simulation:
         self.human_in_field = False
         self.human_visible = True
         self.outcome: Outcome | None = None
-        self.clearance = self._current_clearance()
+        forward, left, self.clearance = self._human_in_robot_frame()
         self.decision_step = 0
         self._steps = 0
         self._command = _NO_COMMAND
         self._stop_steps = 0
         self._failed_in_a_row = 0
         self._sut_error = False
-        robot = self.robot
-        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
         self._counts = _EpisodeCounts(self.clearance, math.atan2(left, forward))
         self._actions: list[NDArray[np.float32]] = []
         self._risks: list[float] = []
@@ -268,16 +265,33 @@ class Simulation:
             raise RuntimeError(f"the episode has ended ({self.outcome.value}); call reset()")
         self._actions.append(np.asarray(action, dtype=np.float32).reshape(2).copy())
         speed, turn_rate = self.decode_action(action)
-        report = _DecisionTally(self._counts.controller_failures)
+        first_step, failures_before = len(self._risks), self._counts.controller_failures
         outcome = None
         for _ in range(self._physics_per_decision):
-            outcome = self._physics(speed, turn_rate, report)
+            outcome = self._physics(speed, turn_rate)
             if outcome is not None:
                 break
         self.decision_step += 1
         if outcome is not None:
             self._record_sample()
-        return report.finish(outcome, self._counts.controller_failures)
+        return self._report(first_step, failures_before, outcome)
+
+    def _report(
+        self, first_step: int, failures_before: int, outcome: Outcome | None
+    ) -> DecisionReport:
+        """The decision that began at physics step ``first_step``. A contact ends the episode,
+        so the decision has one only if the episode ended in it."""
+        risks = self._risks[first_step:]
+        verdict = self._counts.contact_verdict if outcome is not None else ContactVerdict.NONE
+        return DecisionReport(
+            risk=max(risks, default=0.0),
+            risk_sum=sum(risks),
+            contact=verdict is not ContactVerdict.NONE,
+            unsafe=verdict is ContactVerdict.UNSAFE,
+            contact_verdict=verdict.value,
+            controller_failures=self._counts.controller_failures - failures_before,
+            outcome=None if outcome is None else outcome.value,
+        )
 
     def simulate(
         self,
@@ -326,8 +340,8 @@ class Simulation:
         return speed, float(clipped[1]) * self.human_params.max_turn_rate
 
     # ------------------------------------------------------------------ physics
-    def _physics(self, speed: float, turn_rate: float, report: _DecisionTally) -> Outcome | None:
-        """One physics step, tallied into ``report``; the outcome if it ends the episode."""
+    def _physics(self, speed: float, turn_rate: float) -> Outcome | None:
+        """One physics step; the outcome if it ends the episode."""
         dt = self.physics_step
         now = self._steps * dt
         if self._steps % self._control_every == 0:
@@ -353,7 +367,7 @@ class Simulation:
         self.human_position, self.human_heading = human.position, human.heading
         self.human_velocity = human.velocity
         self._steps += 1
-        return self._judge(report)
+        return self._judge()
 
     def _safety(self, now: float) -> None:
         """The safety layer's verdict on the current state."""
@@ -369,16 +383,12 @@ class Simulation:
         self.human_in_field = status.human_in_field
         self._counts.field_steps += int(status.human_in_field)
 
-    def _judge(self, report: _DecisionTally) -> Outcome | None:
+    def _judge(self) -> Outcome | None:
         """Contact, clearance, risk and termination after a physics step."""
         robot = self.robot
-        # The clearance of _current_clearance, from the human's place in the robot's frame,
-        # which also names the face of a contact.
-        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
-        length, width = self.robot_params.length, self.robot_params.width
-        self.clearance = point_rectangle_clearance(forward, left, length, width)
-        self.clearance -= self.human_params.radius
+        forward, left, self.clearance = self._human_in_robot_frame()
         contact = self.clearance <= 0.0
+        length, width = self.robot_params.length, self.robot_params.width
         face = rectangle_face(forward, left, length, width) if contact else ""
         verdict = judge_contact(
             contact, face, robot.speed, robot.heading, self.human_velocity, self.safety_spec
@@ -406,7 +416,6 @@ class Simulation:
         )
         if self.outcome is None and self._steps >= self._max_steps:
             self.outcome = Outcome.TIMEOUT
-        report.add(step_risk, contact, verdict)
         counts = self._counts
         counts.add(step_risk, face if contact else None, verdict)
         if self.clearance < counts.min_clearance or contact:
@@ -464,17 +473,15 @@ class Simulation:
         )
 
     # ------------------------------------------------------------------ state and records
-    def _current_clearance(self) -> float:
+    def _human_in_robot_frame(self) -> tuple[float, float, float]:
+        """The human's centre in the robot's frame (ahead, to the left, in m) and the clearance
+        between the human disc and the robot's rectangle (m, negative: overlap)."""
         robot = self.robot
-        return disc_rectangle_clearance(
-            self.human_position,
-            self.human_params.radius,
-            robot.x,
-            robot.y,
-            robot.heading,
-            self.robot_params.length,
-            self.robot_params.width,
+        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
+        outline = point_rectangle_clearance(
+            forward, left, self.robot_params.length, self.robot_params.width
         )
+        return forward, left, outline - self.human_params.radius
 
     @property
     def sim_time(self) -> float:
@@ -587,37 +594,6 @@ class _EpisodeCounts:
         self.min_clearance = min(self.min_clearance, clearance)
         self.closest_bearing, self.closest_robot_speed = bearing, robot_speed
         self.closest_emergency_stop = stop
-
-
-class _DecisionTally:
-    """Accumulates a :class:`DecisionReport` over a decision's physics steps."""
-
-    def __init__(self, controller_failures_before: int) -> None:
-        self.controller_failures_before = controller_failures_before
-        self.risk = 0.0
-        self.risk_sum = 0.0
-        self.contact = False
-        self.unsafe = False
-        self.verdict = ContactVerdict.NONE
-
-    def add(self, step_risk: float, contact: bool, verdict: ContactVerdict) -> None:
-        self.risk = max(self.risk, step_risk)
-        self.risk_sum += step_risk
-        self.contact = self.contact or contact
-        self.unsafe = self.unsafe or verdict is ContactVerdict.UNSAFE
-        if verdict is not ContactVerdict.NONE:
-            self.verdict = verdict
-
-    def finish(self, outcome: Outcome | None, controller_failures: int) -> DecisionReport:
-        return DecisionReport(
-            risk=self.risk,
-            risk_sum=self.risk_sum,
-            contact=self.contact,
-            unsafe=self.unsafe,
-            contact_verdict=self.verdict.value,
-            controller_failures=controller_failures - self.controller_failures_before,
-            outcome=None if outcome is None else outcome.value,
-        )
 
 
 def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int:

@@ -46,20 +46,6 @@ def point_rectangle_clearance(forward: float, left: float, length: float, width:
     return math.hypot(max(over_x, 0.0), max(over_y, 0.0))
 
 
-def disc_rectangle_clearance(
-    center: FloatArray,
-    radius: float,
-    x: float,
-    y: float,
-    heading: float,
-    length: float,
-    width: float,
-) -> float:
-    """Signed clearance between a disc and a rectangle centred at (x, y) facing ``heading``."""
-    forward, left = to_body_frame(center, x, y, heading)
-    return point_rectangle_clearance(forward, left, length, width) - radius
-
-
 def rectangle_face(forward: float, left: float, length: float, width: float) -> str:
     """The face of a rectangle nearest a point given in its frame.
 
