@@ -31,6 +31,19 @@ def test_the_qd_archive_is_kept_with_its_measures(seeded_run):
     assert archive["objective"].max() == pytest.approx(episodes["max_risk"].max())
 
 
+def test_a_budget_that_ends_within_a_batch_is_spent_exactly():
+    directory = Path(tempfile.mkdtemp()) / "run"
+    config = RunConfig(
+        scenario="head-on",
+        field="none",
+        tester="cem",
+        tester_params={"population": 8},  # 2 elites; the last batch plays 1 episode
+        seed=0,
+        episodes=9,
+    )
+    assert record_run(config, directory)["episodes"] == 9
+
+
 @pytest.mark.slow
 def test_a_batch_on_two_worker_processes_gives_the_same_run():
     def run(workers):

@@ -156,7 +156,10 @@ def record_run(
         on_episode,
         simulation_factory=functools.partial(simulation_of, config),
     )
-    tester.explore(recorder, config.episodes)
+    try:
+        tester.explore(recorder, config.episodes)
+    finally:
+        recorder.close()  # the worker processes of batches played on several cores
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock

@@ -95,25 +95,24 @@ class CrossEntropyTester:
         mean, std = np.zeros(shape), np.full(shape, self.initial_std)
         archive = FailureArchive(neighbours=1)
         stale = 0
-        try:
-            while env.episodes_done < episodes:
-                count = min(self.population, episodes - env.episodes_done)
-                samples = np.clip(mean + std * rng.standard_normal((count, *shape)), -1.0, 1.0)
-                results = env.evaluate_batch(list(samples), self.n_workers)
-                scores, novel = self._scores([r.summary for r in results], archive)
-                # The elites, best first, weighted by rank as CMA-ES weights its parents.
-                elite = samples[np.argsort(scores, kind="stable")[::-1][: self.elites]]
-                elite_mean = np.tensordot(self.weights, elite, axes=1)
-                elite_std = np.sqrt(np.tensordot(self.weights, (elite - elite_mean) ** 2, axes=1))
-                mean = self.smoothing * elite_mean + (1 - self.smoothing) * mean
-                std = self.smoothing * elite_std + (1 - self.smoothing) * std
-                stale = 0 if novel else stale + 1
-                if std.mean() < self.min_std or stale >= self.patience:
-                    # Away from what it has: a fresh mean, and known failures score less.
-                    mean, std = rng.uniform(-0.6, 0.6, shape), np.full(shape, self.initial_std)
-                    stale, self.restarts = 0, self.restarts + 1
-        finally:
-            env.close_pool()
+        while env.episodes_done < episodes:
+            count = min(self.population, episodes - env.episodes_done)
+            samples = np.clip(mean + std * rng.standard_normal((count, *shape)), -1.0, 1.0)
+            results = env.evaluate_batch(list(samples), self.n_workers)
+            if env.episodes_done >= episodes:
+                break  # the budget is spent: nothing left to refit the Gaussian for
+            scores, novel = self._scores([r.summary for r in results], archive)
+            # The elites, best first, weighted by rank as CMA-ES weights its parents.
+            elite = samples[np.argsort(scores, kind="stable")[::-1][: self.elites]]
+            elite_mean = np.tensordot(self.weights, elite, axes=1)
+            elite_std = np.sqrt(np.tensordot(self.weights, (elite - elite_mean) ** 2, axes=1))
+            mean = self.smoothing * elite_mean + (1 - self.smoothing) * mean
+            std = self.smoothing * elite_std + (1 - self.smoothing) * std
+            stale = 0 if novel else stale + 1
+            if std.mean() < self.min_std or stale >= self.patience:
+                # Away from what it has: a fresh mean, and known failures score less.
+                mean, std = rng.uniform(-0.6, 0.6, shape), np.full(shape, self.initial_std)
+                stale, self.restarts = 0, self.restarts + 1
 
     def _scores(
         self, summaries: list[EpisodeSummary], archive: FailureArchive

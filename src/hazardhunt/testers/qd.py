@@ -98,21 +98,18 @@ class QualityDiversityTester:
         scheduler = self._scheduler(env)
         columns = [DESCRIPTOR_NAMES.index(m) for m in self.measures]
         horizon = env.horizon
-        try:
-            while env.episodes_done < episodes:
-                solutions = scheduler.ask()
-                left = episodes - env.episodes_done
-                sequences = solutions[:left].reshape(-1, horizon, 2)
-                results = env.evaluate_batch(list(sequences), self.n_workers)
-                objective = [result.summary.max_risk for result in results]
-                measures = [describe(result.summary)[columns] for result in results]
-                if len(results) < len(solutions):
-                    # The budget ends within this batch: the archive keeps what it played.
-                    self.archive.add(solutions[: len(results)], objective, measures)
-                    break
-                scheduler.tell(objective, measures)
-        finally:
-            env.close_pool()
+        while env.episodes_done < episodes:
+            solutions = scheduler.ask()
+            left = episodes - env.episodes_done
+            sequences = solutions[:left].reshape(-1, horizon, 2)
+            results = env.evaluate_batch(list(sequences), self.n_workers)
+            objective = [result.summary.max_risk for result in results]
+            measures = [describe(result.summary)[columns] for result in results]
+            if len(results) < len(solutions):
+                # The budget ends within this batch: the archive keeps what it played.
+                self.archive.add(solutions[: len(results)], objective, measures)
+                break
+            scheduler.tell(objective, measures)
 
     def _scheduler(self, env: EpisodeRecorder) -> Any:
         from ribs.archives import GridArchive
