@@ -60,6 +60,8 @@ def scenarios(
     """Simulate one episode per scenario with a random human and draw each."""
     from hazardhunt.env.rendering import plot_episode
     from hazardhunt.sim.simulation import Simulation
+    from hazardhunt.sut.safety_layer import field_shape
+    from hazardhunt.world.scenario import load_scenario
 
     chosen = names or list(BUILTIN_SCENARIOS)
     table = Table(
@@ -70,12 +72,15 @@ def scenarios(
         task = progress.add_task("simulating", total=len(chosen))
         for name in chosen:
             progress.update(task, description=f"simulating {name}")
+            scenario = load_scenario(name)
             try:
-                simulation = Simulation.build(name, field, solver=solver)
-            except ScenarioError:
-                raise
+                field_shape(scenario, field)
             except ValueError as error:
                 raise typer.BadParameter(str(error), param_hint="--field") from None
+            try:
+                simulation = Simulation.build(scenario, field, solver=solver)
+            except ValueError as error:
+                raise typer.BadParameter(str(error), param_hint="--solver") from None
             result = simulation.simulate(lambda _: rng.uniform(-1.0, 1.0, size=2))
             summary = result.summary
             stem = Path(name).stem

@@ -28,6 +28,14 @@ from hazardhunt.world.geometry import (
 from hazardhunt.world.scenario import Scenario
 
 
+class FieldShapeError(ValueError):
+    """A field shape's value out of its range; ``key`` names it."""
+
+    def __init__(self, key: str, problem: str) -> None:
+        super().__init__(f"{key} {problem}")
+        self.key = key
+
+
 @dataclass(frozen=True)
 class FieldShape:
     """A protective field: a half-disc ahead of the robot, bands along its sides, and the time
@@ -43,12 +51,13 @@ class FieldShape:
     the study, brakes in the physics step the field is violated."""
 
     def __post_init__(self) -> None:
-        if self.diameter is not None and not (math.isfinite(self.diameter) and self.diameter > 0):
-            raise ValueError(f"diameter must be a positive number of m, not {self.diameter!r}")
-        if not (math.isfinite(self.side_margin) and self.side_margin >= 0):
-            raise ValueError(f"side_margin must be >= 0 m, not {self.side_margin!r}")
-        if not (math.isfinite(self.response_time) and self.response_time >= 0):
-            raise ValueError(f"response_time must be >= 0 s, not {self.response_time!r}")
+        diameter, side_margin, response_time = self.diameter, self.side_margin, self.response_time
+        if diameter is not None and not (math.isfinite(diameter) and diameter > 0):
+            raise FieldShapeError("diameter", f"must be a positive number of m, not {diameter!r}")
+        if not (math.isfinite(side_margin) and side_margin >= 0):
+            raise FieldShapeError("side_margin", f"must be >= 0 m, not {side_margin!r}")
+        if not (math.isfinite(response_time) and response_time >= 0):
+            raise FieldShapeError("response_time", f"must be >= 0 s, not {response_time!r}")
 
     @property
     def covers_anything(self) -> bool:
@@ -105,8 +114,8 @@ def _shape_from_table(where: str, values: Mapping[str, Any]) -> FieldShape:
             raise ValueError(f"{where}.{key}: must be a number, not {value!r}")
     try:
         return FieldShape(**{key: float(value) for key, value in values.items()})
-    except ValueError as error:
-        raise ValueError(f"{where}.{str(error).split(' ', 1)[0]}: {error}") from None
+    except FieldShapeError as error:
+        raise ValueError(f"{where}.{error.key}: {error}") from None
 
 
 _STATUSES = {
