@@ -33,3 +33,25 @@ def run_tables(run_directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """A run's episodes table (without wall-clock columns) and failures table."""
     episodes = pd.read_parquet(run_directory / "episodes.parquet").drop(columns=WALL_CLOCK_COLUMNS)
     return episodes, pd.read_parquet(run_directory / "failures.parquet")
+
+
+MARKER_MODULE = """
+from pathlib import Path
+
+from hazardhunt.sut.conservative import ConservativeController as Controller
+
+Path({marker!r}).touch()  # proof that the module was imported
+"""
+
+
+def marker_module(folder: Path, marker: Path, name: str = "marker_sut") -> str:
+    """Write module ``name`` into ``folder``: importing it creates ``marker``; its
+    ``Controller`` is a cheap one. Returns the controller's import path."""
+    (folder / f"{name}.py").write_text(MARKER_MODULE.format(marker=str(marker)))
+    return f"{name}:Controller"
+
+
+def hostile_plugin(evidence: Path) -> dict[str, object]:
+    """A plug-in as a stranger's file could name one: building it runs a shell command that
+    creates ``evidence``."""
+    return {"path": "os:system", "params": {"command": f"touch {evidence}"}}

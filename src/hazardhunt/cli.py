@@ -144,6 +144,15 @@ ReadClassifierOption = Annotated[
         "in results."
     ),
 ]
+TrustPluginsOption = Annotated[
+    bool,
+    typer.Option(
+        "--trust-plugins",
+        help="Import the controller and safety-layer plug-ins the files read name (by default "
+        "hazardhunt imports no code named in a run or case; name a plug-in with --controller "
+        "or --safety-layer instead to choose it yourself).",
+    ),
+]
 RegressClassifierOption = Annotated[
     str | None,
     typer.Option(
@@ -241,6 +250,18 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
     )
 
 
+def _announcer() -> Callable[[str], None]:
+    """Prints each message about a module to be imported once, on stderr."""
+    said: set[str] = set()
+
+    def announce(message: str) -> None:
+        if message not in said:
+            said.add(message)
+            err_console.print(escape(message))
+
+    return announce
+
+
 @app.command()
 def replay(
     run_directory: Annotated[Path, typer.Argument(help="A run directory.")],
@@ -248,11 +269,39 @@ def replay(
         int, typer.Option(help="The episode of the failure, as the run numbers it.")
     ],
     gif: Annotated[Path | None, typer.Option(help="Write an animation of the replay.")] = None,
+    controller: Annotated[
+        str | None,
+        typer.Option(
+            help="Replay with this controller (package.module:Class): the run's own import "
+            "path to confirm it (with its parameters), or another one."
+        ),
+    ] = None,
+    controller_param: ControllerParamOption = None,
+    safety_layer: Annotated[
+        str | None,
+        typer.Option(
+            help="Replay with this safety layer (package.module:Class): the run's own import "
+            "path to confirm it (with its parameters), or another one."
+        ),
+    ] = None,
+    safety_layer_param: SafetyLayerParamOption = None,
+    trust_plugins: TrustPluginsOption = False,
 ) -> None:
-    """Re-simulate a recorded failure and confirm it ends the same way at the same time."""
+    """Re-simulate a recorded failure and confirm it ends the same way at the same time.
+
+    A run whose controller or safety layer is a plug-in replays only with that plug-in named
+    (--controller, --safety-layer) or with --trust-plugins: a run directory is data.
+    """
     from hazardhunt.campaign.replay import replay_failure
 
-    replay = replay_failure(run_directory, episode)
+    replay = replay_failure(
+        run_directory,
+        episode,
+        controller=_plugin("--controller", controller, controller_param),
+        safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
+        trust_plugins=trust_plugins,
+        announce=_announcer(),
+    )
     verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
     console.print(
         f"episode {episode}: recorded {replay.recorded_outcome} at "
@@ -345,8 +394,19 @@ def export(
     ] = False,
     classifier: ReadClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
+    trust_plugins: Annotated[
+        bool,
+        typer.Option(
+            "--trust-plugins",
+            help="With --pytest: the test module imports the controller and safety-layer "
+            "plug-ins the cases name (TRUST_PLUGINS = True in it).",
+        ),
+    ] = False,
 ) -> None:
-    """Write failures as self-contained regression cases (TOML), to re-run with regress."""
+    """Write failures as self-contained regression cases (TOML), to re-run with regress.
+
+    Exporting imports nothing: the cases name the runs' plug-ins as data.
+    """
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
@@ -355,7 +415,8 @@ def export(
     if not written:
         console.print("the results hold no failure")
     if pytest_module:
-        console.print(f"pytest module written to [bold]{write_pytest_module(out, spec)}[/bold]")
+        module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
+        console.print(f"pytest module written to [bold]{module}[/bold]")
 
 
 @app.command()
@@ -370,11 +431,15 @@ def regress(
     ] = None,
     classifier: RegressClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
+    trust_plugins: TrustPluginsOption = False,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print the results as JSON on stdout.")
     ] = False,
 ) -> None:
     """Re-run regression cases: each still fails, changed (fails differently) or is fixed.
+
+    A case whose controller or safety layer is a plug-in re-runs only with a plug-in named
+    (--controller, --safety-layer) or with --trust-plugins: a case file is data.
 
     Exits with code 1 while any case still fails or changed, so that it can gate a CI job.
     """
@@ -384,6 +449,7 @@ def regress(
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
     classifier_spec = _plugin("--classifier", classifier, classifier_param)
     files = case_files(cases)
+    announce = _announcer()
     results = []
     with Progress(console=err_console, transient=True) as progress:
         task = progress.add_task("re-running cases", total=len(files))
@@ -395,6 +461,8 @@ def regress(
                     safety_layer=safety_spec,
                     field=field,
                     classifier=classifier_spec,
+                    trust_plugins=trust_plugins,
+                    announce=announce,
                 )
             )
             progress.advance(task)

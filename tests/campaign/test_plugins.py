@@ -62,11 +62,18 @@ def test_the_example_controller_from_the_command_line_fails_within_a_few_hundred
     config = json.loads((out / "config.json").read_text())
     assert config["run"]["controller"]["path"] == CONTROLLER
     assert config["run"]["controller"]["params"] == {"stop_distance": 1.0}
-    # Its failures replay exactly: the run loads the plug-in again.
+    # Its failures replay exactly once the plug-in is named again: the same import path
+    # confirms the run's controller, with the parameters the run recorded.
     failure = int(pd.read_parquet(out / "failures.parquet")["episode"].iloc[0])
-    replayed = hazardhunt("replay", out, "--episode", failure, cwd=EXAMPLE)
+    refused = hazardhunt("replay", out, "--episode", failure, cwd=EXAMPLE)
+    assert refused.returncode == 2
+    assert f"names the plug-in '{CONTROLLER}'" in refused.stderr
+    replayed = hazardhunt(
+        "replay", out, "--episode", failure, "--controller", CONTROLLER, cwd=EXAMPLE
+    )
     assert replayed.returncode == 0, replayed.stderr
     assert "reproduced" in replayed.stdout
+    assert "importing module 'cautious_pursuit'" in replayed.stderr
 
 
 def test_the_example_controller_from_a_campaign_file_fails(tmp_path):

@@ -1,14 +1,22 @@
-"""Every recorded failure replays exactly from its record."""
+"""Every recorded failure replays exactly from its record; a run directory someone sent is data:
+replaying, reporting or exporting it imports no plug-in it names unless the user allows it."""
+
+import json
+import shutil
+import sys
 
 import pandas as pd
 import pytest
 from PIL import Image
 
-from hazardhunt.campaign.config import RunConfig
+from hazardhunt.analysis.report import write_report
+from hazardhunt.campaign.config import CampaignConfig, RunConfig
+from hazardhunt.campaign.plugins import UntrustedPluginError
 from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import read_trajectory
-from tests.helpers import hazardhunt
+from hazardhunt.cases import export_cases, regress_case
+from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
 
 @pytest.fixture(scope="module")
@@ -61,3 +69,135 @@ def test_an_unknown_failure_is_a_clear_error(run_with_failures):
     done = hazardhunt("replay", run_with_failures, "--episode", 999_999)
     assert done.returncode == 2
     assert "no failure in episode 999999" in done.stderr
+
+
+def received_copy(run_directory, folder, **plugins):
+    """A copy of a run directory whose config.json names ``plugins`` (controller, safety_layer)
+    as a stranger's could."""
+    copy = folder / "run"
+    shutil.copytree(run_directory, copy)
+    config = json.loads((copy / "config.json").read_text())
+    config["run"].update(plugins)
+    (copy / "config.json").write_text(json.dumps(config))
+    return copy
+
+
+@pytest.fixture
+def received(run_with_failures, tmp_path):
+    """A run directory as a stranger could send it: its controller runs a shell command when
+    built, its safety layer is a module (in the working directory and in the directory the
+    file names) that notes its own import."""
+    here = tmp_path / "here"
+    here.mkdir()
+    evidence = {"pwned": tmp_path / "PWNED", "imported": tmp_path / "imported"}
+    layer = marker_module(here, evidence["imported"])
+    run = received_copy(
+        run_with_failures,
+        tmp_path,
+        controller=hostile_plugin(evidence["pwned"]),
+        safety_layer={"path": layer, "params": {}, "search_path": [str(here)]},
+    )
+    episode = int(pd.read_parquet(run / "failures.parquet")["episode"][0])
+    return run, episode, here, evidence
+
+
+def test_replaying_a_received_run_imports_nothing_it_names(received):
+    run, episode, here, evidence = received
+    done = hazardhunt("replay", run, "--episode", episode, cwd=here)
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: {run / 'config.json'}: run.controller: names the plug-in ")
+    assert "'os:system'" in line
+    assert "(--controller os:system)" in line
+    assert "(--trust-plugins)" in line
+    # Naming another controller is not enough: the safety layer is the run's too.
+    done = hazardhunt(
+        "replay", run, "--episode", episode, "--controller",
+        "hazardhunt.sut.pursuit:PursuitController", cwd=here,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "run.safety_layer: names the plug-in 'marker_sut:Controller'" in done.stderr
+    assert not evidence["pwned"].exists()
+    assert not evidence["imported"].exists()
+
+
+def test_reporting_and_exporting_a_received_run_imports_nothing(received):
+    run, _, here, evidence = received
+    report = hazardhunt("report", run, cwd=here)
+    assert report.returncode == 0, report.stderr
+    representatives = pd.read_csv(run / "report" / "tables" / "representatives.csv")
+    assert set(representatives["replayed"]) == {"not replayed (plug-in SUT)"}
+    for name in representatives["class"]:  # drawn from the record, not animated
+        stem = run / "report" / "figures" / f"class_{name.replace('/', '_')}"
+        assert stem.with_suffix(".png").is_file()
+        assert not stem.with_suffix(".gif").exists()
+    cases = here / "cases"
+    export = hazardhunt("export", run, "--out", cases, "--pytest", cwd=here)
+    assert export.returncode == 0, export.stderr
+    assert all('path = "os:system"' in case.read_text() for case in cases.glob("*.toml"))
+    assert "TRUST_PLUGINS = False" in (cases / "test_hazardhunt_cases.py").read_text()
+    regress = hazardhunt("regress", cases, cwd=here)
+    assert regress.returncode == 2
+    assert "names the plug-in 'os:system'" in regress.stderr
+    assert not evidence["pwned"].exists()
+    assert not evidence["imported"].exists()
+
+
+def test_reporting_and_exporting_a_received_campaign_imports_nothing(
+    received, tmp_path, monkeypatch
+):
+    run, _, here, evidence = received
+    monkeypatch.chdir(here)
+    stored = json.loads((run / "config.json").read_text())["run"]
+    config = CampaignConfig(
+        scenarios=["overtaking"],
+        fields=["none"],
+        testers=["random"],
+        seeds=[0],
+        episodes=stored["episodes"],
+        controller=stored["controller"],
+        safety_layer=stored["safety_layer"],
+    )
+    campaign = tmp_path / "campaign"
+    (campaign / "runs").mkdir(parents=True)
+    (campaign / "campaign.json").write_text(json.dumps(config.model_dump(mode="json")))
+    shutil.copytree(run, campaign / "runs" / config.runs()[0].run_id)
+    write_report(campaign)
+    cases = export_cases(campaign, tmp_path / "cases")
+    assert cases
+    with pytest.raises(UntrustedPluginError, match="names the plug-in 'os:system'"):
+        regress_case(cases[0])
+    assert not evidence["pwned"].exists()
+    assert not evidence["imported"].exists()
+    assert "marker_sut" not in sys.modules
+
+
+def test_replay_imports_a_stored_plug_in_when_allowed_and_says_which(run_with_failures, tmp_path):
+    marker = tmp_path / "imported"
+    controller = marker_module(tmp_path, marker)
+    run = received_copy(run_with_failures, tmp_path, controller={"path": controller})
+    episode = int(pd.read_parquet(run / "failures.parquet")["episode"][0])
+    for option in (["--trust-plugins"], ["--controller", controller]):
+        marker.unlink(missing_ok=True)
+        done = hazardhunt("replay", run, "--episode", episode, *option, cwd=tmp_path)
+        assert done.returncode in (0, 1), done.stderr  # another SUT need not reproduce it
+        assert f"episode {episode}: recorded failure" in done.stdout
+        assert "importing module 'marker_sut'" in done.stderr
+        assert marker.exists()
+
+
+def test_a_trusted_plug_in_is_not_looked_for_where_the_file_says(run_with_failures, tmp_path):
+    elsewhere, here = tmp_path / "elsewhere", tmp_path / "here"
+    elsewhere.mkdir(), here.mkdir()
+    marker = tmp_path / "imported"
+    controller = marker_module(elsewhere, marker)
+    run = received_copy(
+        run_with_failures,
+        tmp_path,
+        controller={"path": controller, "params": {}, "search_path": [str(elsewhere)]},
+    )
+    episode = int(pd.read_parquet(run / "failures.parquet")["episode"][0])
+    done = hazardhunt("replay", run, "--episode", episode, "--trust-plugins", cwd=here)
+    assert done.returncode == 2
+    assert "cannot import module 'marker_sut'" in done.stderr
+    assert not marker.exists()

@@ -11,7 +11,7 @@ import pytest
 import tomli_w
 
 from hazardhunt.cases import CaseError, regress_case
-from tests.helpers import hazardhunt
+from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -49,7 +49,8 @@ def cases(run):
 
 
 def regress(cases, *args):
-    done = hazardhunt("regress", cases, "--json", *args, cwd=EXAMPLE)
+    """``regress --json`` from the example's folder, trusting the cases' own plug-ins."""
+    done = hazardhunt("regress", cases, "--json", "--trust-plugins", *args, cwd=EXAMPLE)
     return done.returncode, json.loads(done.stdout)
 
 
@@ -174,7 +175,9 @@ def test_a_malformed_case_file_names_the_file_and_key(cases, tmp_path, break_cas
 
 def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
     out = tmp_path / "cases"
-    assert hazardhunt("export", run, "--out", out, "--pytest").returncode == 0
+    done = hazardhunt("export", run, "--out", out, "--pytest", "--trust-plugins")
+    assert done.returncode == 0, done.stderr
+    assert "TRUST_PLUGINS = True" in (out / "test_hazardhunt_cases.py").read_text()
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(out)],
         capture_output=True,
@@ -185,6 +188,8 @@ def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):
     count = len(list(out.glob("*.toml")))
     assert done.returncode == 1, done.stdout
     assert f"{count} failed" in done.stdout
+    assert ": still fails (" in done.stdout  # the SUT fails them, not the module
+    assert "UntrustedPluginError" not in done.stdout
 
 
 def test_case_files_hold_the_recorded_actions_and_times_bit_for_bit(run, cases):
@@ -214,3 +219,79 @@ def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):
     report = json.loads(done.stdout)
     assert {c["verdict"] for c in report["cases"]} == {"changed"}
     assert {c["outcome"] for c in report["cases"]} == {"sut_error"}
+
+
+def case_file(folder: Path, controller: dict[str, object], name: str = "received") -> Path:
+    """A valid case on the crossing whose SUT's controller is ``controller``."""
+    from hazardhunt.world.scenario import scenario_data
+
+    case = {
+        "format": 1,
+        "environment": {
+            "field": "none",
+            "seed": 0,
+            "decision_period": 2.0,
+            "episode_duration": 30.0,
+            "stall_duration": 10.0,
+        },
+        "expected": {"class": "front/moving"},
+        "sut": {"controller": controller},
+        "human": {"actions": [[0.0, 0.0]] * 15},
+        "scenario": scenario_data("crossing"),
+    }
+    path = folder / f"{name}.toml"
+    path.write_text(tomli_w.dumps(case))
+    return path
+
+
+def test_regress_on_a_received_case_imports_nothing_it_names(tmp_path):
+    received, here = tmp_path / "received", tmp_path / "here"
+    received.mkdir(), here.mkdir()
+    pwned, marker = tmp_path / "PWNED", tmp_path / "imported"
+    case = case_file(received, hostile_plugin(pwned))
+    # A module a case names sits in the case folder and in the working directory.
+    marker_module(received, marker)
+    marker_module(here, marker)
+    other = case_file(received, {"path": "marker_sut:Controller"}, "other")
+    for target, path in ((case, "os:system"), (other, "marker_sut:Controller"), (received, None)):
+        done = hazardhunt("regress", target, cwd=here)
+        assert done.returncode == 2, done.stdout
+        [line] = done.stderr.strip().splitlines()
+        assert line.startswith("error: ")
+        assert ": sut.controller: names the plug-in " in line
+        assert "--trust-plugins" in line
+        if path is not None:
+            assert f"error: {target}: sut.controller: names the plug-in {path!r}" in line
+            assert f"(--controller {path})" in line
+    assert not pwned.exists()
+    assert not marker.exists()
+
+
+def test_regress_never_imports_from_the_case_folder(tmp_path):
+    received, here = tmp_path / "received", tmp_path / "here"
+    received.mkdir(), here.mkdir()
+    marker = tmp_path / "imported"
+    path = marker_module(received, marker)  # only next to the case
+    case_file(received, {"path": path})
+    for option in (["--trust-plugins"], ["--controller", path]):
+        done = hazardhunt("regress", received, *option, cwd=here)
+        assert done.returncode == 2
+        assert "cannot import module 'marker_sut'" in done.stderr
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize(
+    "option",
+    [["--trust-plugins"], ["--controller", "marker_sut:Controller"]],
+    ids=["trusted", "named"],
+)
+def test_regress_imports_a_case_plug_in_when_allowed_and_says_which(tmp_path, option):
+    marker = tmp_path / "imported"
+    path = marker_module(tmp_path, marker)
+    case = case_file(tmp_path, {"path": path, "params": {"cruise_speed": 0.5}})
+    done = hazardhunt("regress", case, "--json", *option, cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    assert "importing module 'marker_sut'" in done.stderr
+    assert marker.exists()
+    [result] = json.loads(done.stdout)["cases"]
+    assert result["outcome"] != "sut_error"

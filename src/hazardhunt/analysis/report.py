@@ -6,6 +6,9 @@ Writes ``DIR/report/``::
     summary.json     per run and per table, machine-readable
     tables/          every table as CSV and Markdown
     figures/         every figure as PNG, the representative failures also as GIF
+
+Writing a report imports nothing that the results name: the failures of a run whose controller
+or safety layer is a plug-in are drawn from their stored trajectories instead of re-simulated.
 """
 
 from __future__ import annotations
@@ -26,12 +29,21 @@ import hazardhunt
 from hazardhunt.analysis import diversity, figures, tables
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
-from hazardhunt.campaign.replay import load_run_config, replay_actions, replay_failure
-from hazardhunt.campaign.store import write_bytes_atomic, write_json_atomic
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.replay import (
+    load_run_config,
+    names_sut_plugins,
+    replay_actions,
+    replay_failure,
+)
+from hazardhunt.campaign.store import read_trajectory, write_bytes_atomic, write_json_atomic
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
-from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sim.simulation import ROUTE_MARGIN, Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
+from hazardhunt.sut.route import plan_route
+from hazardhunt.sut.safety_layer import FieldShape
+from hazardhunt.world.scenario import load_scenario
 
 RUN_COLUMNS = (
     "run_id",
@@ -322,6 +334,13 @@ def _reward_hacking(report: _Report, results: Results) -> None:
         section.parts.append("<p>No episode matched the loitering pattern.</p>")
         return
     config = load_run_config(results.run_directory(str(typical["run_id"])))
+    if names_sut_plugins(config):
+        section.parts.append(
+            f"<p>The most typical loitering episode ({html.escape(str(typical['run_id']))}, "
+            f"episode {int(typical['episode'])}) ran a plug-in controller or safety layer, "
+            "which the report does not import: it is not re-simulated.</p>"
+        )
+        return
     simulation, _ = replay_actions(config, typical["actions"])
     times, captions = loitering_frames(simulation)
     path = plot_frames(report.figures / "loitering.png", simulation, times, captions)
@@ -395,29 +414,19 @@ def _representatives(report: _Report, results: Results) -> None:
     rows = []
     for _, row in chosen.iterrows():
         run_id, episode, name = str(row["run_id"]), int(row["episode"]), str(row["class"])
-        replay = replay_failure(results.run_directory(run_id), episode)
+        directory = results.run_directory(run_id)
         stem = _file_name(f"class_{name}")
         title = f"{name}: {run_id}, episode {episode}"
-        simulation = replay.simulation
-        picture = plot_episode(
-            report.figures / f"{stem}.png",
-            simulation.scenario,
-            simulation.route,
-            simulation.trajectory(),
-            simulation.field,
-            title,
-            replay.result.outcome,
-        )
-        animation = animate_episode(
-            report.figures / f"{stem}.gif",
-            simulation,
-            title=name,
-            fps=5,
-            last_seconds=6.0,
-            size=4.5,
-        )
-        report.image(section, picture, title)
-        report.image(section, animation, f"{name}: the last 6 s")
+        config = load_run_config(directory)
+        if names_sut_plugins(config):
+            field = results.field_shape(str(row["field"]), str(row["scenario"]))
+            picture = _recorded_picture(
+                report.figures / f"{stem}.png", directory, config, field, row, title
+            )
+            report.image(section, picture, f"{title} (as recorded)")
+            replayed = "not replayed (plug-in SUT)"
+        else:
+            replayed = _replayed_pictures(report, section, directory, episode, name, title)
         rows.append(
             {
                 "class": name,
@@ -425,12 +434,60 @@ def _representatives(report: _Report, results: Results) -> None:
                 "episode": episode,
                 "sim_time": row["sim_time"],
                 "contact_face": row["contact_face"],
-                "replayed": "reproduced" if replay.matches else "NOT reproduced",
+                "replayed": replayed,
             }
         )
     report.table(
         section, "representatives", pd.DataFrame(rows), "hazardhunt replay RUN --episode EPISODE"
     )
+
+
+def _replayed_pictures(
+    report: _Report, section: _Section, directory: Path, episode: int, name: str, title: str
+) -> str:
+    """Re-simulate a failure of a run with the built-in SUT, draw it and its last seconds;
+    whether it reproduced."""
+    replay = replay_failure(directory, episode)
+    stem = _file_name(f"class_{name}")
+    simulation = replay.simulation
+    picture = plot_episode(
+        report.figures / f"{stem}.png",
+        simulation.scenario,
+        simulation.route,
+        simulation.trajectory(),
+        simulation.field,
+        title,
+        replay.result.outcome,
+    )
+    animation = animate_episode(
+        report.figures / f"{stem}.gif",
+        simulation,
+        title=name,
+        fps=5,
+        last_seconds=6.0,
+        size=4.5,
+    )
+    report.image(section, picture, title)
+    report.image(section, animation, f"{name}: the last 6 s")
+    return "reproduced" if replay.matches else "NOT reproduced"
+
+
+def _recorded_picture(
+    path: Path, directory: Path, config: RunConfig, field: FieldShape, row: pd.Series, title: str
+) -> Path:
+    """Draw a failure of the run in ``directory`` from its stored trajectory (no SUT is
+    built)."""
+    scenario = load_scenario(config.scenario)
+    robot = config.env.robot
+    route = plan_route(
+        scenario.floor,
+        scenario.robot_start.position,
+        scenario.waypoints,
+        scenario.goal,
+        robot.width / 2 + ROUTE_MARGIN,
+    )
+    trajectory = read_trajectory(directory, int(row["episode"]))
+    return plot_episode(path, scenario, route, trajectory, field, title, str(row["outcome"]), robot)
 
 
 def _rates(report: _Report, results: Results) -> None:

@@ -4,16 +4,23 @@ each kind is built from it: controller, safety layer, tester and failure classif
 Configuration only names plug-ins; nothing is imported while it is validated. They are built
 where they are used (a run builds its own) and checked once where a campaign file or a command
 line is read (:func:`hazardhunt.campaign.config.check_plugins`).
+
+A plug-in is code, imported because the user named it: on the command line or in their own
+campaign file. A plug-in named in a file hazardhunt reads back (a run's ``config.json``, a
+regression case) is data: :func:`allowed_plugin` lets it be imported only when the user names it
+again or trusts the file's plug-ins, and says which module is about to be imported.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict
 
 from hazardhunt.spec.failure_classes import FailureClassifier, MechanismClassifier
-from hazardhunt.sut.plugins import build, build_controller, build_safety_layer
+from hazardhunt.sut.plugins import PluginError, build, build_controller, build_safety_layer
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 from hazardhunt.testers.base import Tester
 from hazardhunt.testers.registry import build_tester
@@ -30,8 +37,67 @@ class PluginSpec(BaseModel):
     params: dict[str, Any] = {}
     """Keyword parameters of the class."""
     search_path: list[str] = []
-    """Directories the module is imported from besides ``sys.path`` (hazardhunt adds the
-    campaign file's directory and the working directory)."""
+    """Directories the module is imported from besides ``sys.path``: the working directory for a
+    plug-in named on the command line, plus the campaign file's directory for one named in a
+    campaign file; never the directory of a file read back (see :func:`allowed_plugin`)."""
+
+
+TRUST_OPTION = "--trust-plugins"
+"""The command-line flag that lets ``replay`` and ``regress`` import the plug-ins a file names."""
+
+
+class UntrustedPluginError(PluginError):
+    """A file read back names a plug-in that the user has neither named again nor trusted."""
+
+
+def allowed_plugin(
+    stored: PluginSpec | None,
+    given: PluginSpec | None,
+    *,
+    where: str,
+    option: str,
+    trust: bool = False,
+    announce: Callable[[str], None] | None = None,
+) -> PluginSpec | None:
+    """The plug-in to import in place of one a file names: ``given`` (named by the user), else
+    ``stored`` if ``trust``, else None when the file names none (the built-in one is used).
+
+    ``given`` with the stored import path and no parameters of its own confirms the stored
+    plug-in: it takes the stored parameters. Either way the module is imported as a plug-in
+    named on the command line is (the working directory, then ``sys.path``), never from a
+    directory the file names or lies in. ``announce`` is told which module is about to be
+    imported.
+
+    Args:
+        stored: The plug-in the file names (data), None if it names none.
+        given: The plug-in the user named for it (``option`` on the command line), or None.
+        where: The file and key that name ``stored``, for messages (``case.toml: sut.controller``).
+        option: The command-line option that names this plug-in (``--controller``).
+        trust: The user allows the file's own plug-ins to be imported (``--trust-plugins``).
+        announce: Called with one line naming the module, before anything is imported.
+
+    Raises:
+        UntrustedPluginError: ``stored`` is a plug-in, and neither ``given`` nor ``trust``.
+    """
+    if given is not None:
+        if stored is not None and given.path == stored.path and not given.params:
+            given = given.model_copy(update={"params": dict(stored.params)})
+        chosen, reason = given, f"{option} {given.path}"
+    elif stored is None:
+        return None
+    elif trust:
+        chosen = PluginSpec(path=stored.path, params=stored.params, search_path=[str(Path.cwd())])
+        reason = f"{TRUST_OPTION}: {where} names {stored.path}"
+    else:
+        raise UntrustedPluginError(
+            f"{where}: names the plug-in {stored.path!r}, code that hazardhunt does not import "
+            f"from a file it reads; to run it, name it ({option} {stored.path}) or trust this "
+            f"file's plug-ins ({TRUST_OPTION})"
+        )
+    if announce is not None:
+        module = chosen.path.partition(":")[0]
+        announce(f"importing module {module!r} ({reason})")
+    return chosen
 
 
 def make_controller(spec: PluginSpec) -> Controller:

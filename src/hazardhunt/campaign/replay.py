@@ -1,8 +1,14 @@
-"""Re-simulate a recorded failure from its record and check that it ends the same way."""
+"""Re-simulate a recorded failure from its record and check that it ends the same way.
+
+A run directory is data: a controller or safety layer its ``config.json`` names is imported
+only when the caller names it again or trusts the run's plug-ins
+(:func:`hazardhunt.campaign.plugins.allowed_plugin`).
+"""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -11,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import simulation_of
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 
@@ -69,17 +76,86 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
     return config, match.iloc[0].to_dict()
 
 
+def names_sut_plugins(config: RunConfig) -> bool:
+    """Whether a run's SUT has a plug-in (controller or safety layer): replaying it imports
+    code."""
+    return config.controller is not None or config.safety_layer is not None
+
+
+def allowed_sut(
+    config: RunConfig,
+    run_directory: Path,
+    *,
+    controller: PluginSpec | None = None,
+    safety_layer: PluginSpec | None = None,
+    trust_plugins: bool = False,
+    announce: Callable[[str], None] | None = None,
+) -> RunConfig:
+    """A stored run's configuration with the SUT plug-ins that may be imported to replay it:
+    those given, else (with ``trust_plugins``) those it names (see
+    :func:`hazardhunt.campaign.plugins.allowed_plugin`).
+
+    Raises:
+        UntrustedPluginError: The run names a plug-in that is neither given nor trusted.
+    """
+    where = str(run_directory / "config.json")
+    allowed = {
+        key: allowed_plugin(
+            getattr(config, key),
+            given,
+            where=f"{where}: run.{key}",
+            option=option,
+            trust=trust_plugins,
+            announce=announce,
+        )
+        for key, given, option in (
+            ("controller", controller, "--controller"),
+            ("safety_layer", safety_layer, "--safety-layer"),
+        )
+    }
+    return config.model_copy(update=allowed)
+
+
 def replay_actions(config: RunConfig, actions: Any) -> tuple[Simulation, EpisodeResult]:
     """Play one episode of a run's simulation with recorded actions; the simulation after it
-    and the episode's result (with its trajectory)."""
+    and the episode's result (with its trajectory). This imports the plug-ins ``config``
+    names: a configuration read back from a file goes through :func:`allowed_sut` first."""
     simulation = simulation_of(config)
     actions = np.asarray([list(action) for action in actions], dtype=np.float32).reshape(-1, 2)
     return simulation, simulation.simulate(actions)
 
 
-def replay_failure(run_directory: Path, episode: int) -> ReplayResult:
-    """Replay the failure of one episode of a run with its recorded actions."""
+def replay_failure(
+    run_directory: Path,
+    episode: int,
+    *,
+    controller: PluginSpec | None = None,
+    safety_layer: PluginSpec | None = None,
+    trust_plugins: bool = False,
+    announce: Callable[[str], None] | None = None,
+) -> ReplayResult:
+    """Replay the failure of one episode of a run with its recorded actions.
+
+    A run with the built-in SUT replays as it is. A controller or safety layer the run names
+    is imported only when given again (``controller``, ``safety_layer``: another SUT, or the
+    same import path to confirm it) or with ``trust_plugins``; ``announce`` is told which
+    module is about to be imported.
+
+    Raises:
+        ReplayError: The run directory or the failure does not exist.
+        UntrustedPluginError: The run names a plug-in that is neither given nor trusted;
+            nothing has been imported.
+        PluginError: A plug-in does not load.
+    """
     config, row = load_failure(run_directory, episode)
+    config = allowed_sut(
+        config,
+        run_directory,
+        controller=controller,
+        safety_layer=safety_layer,
+        trust_plugins=trust_plugins,
+        announce=announce,
+    )
     simulation, result = replay_actions(config, row["actions"])
     return ReplayResult(
         episode=episode,

@@ -12,13 +12,16 @@ compares:
   differently;
 - ``fixed``: neither.
 
-A failure classifier plug-in that a case names is not imported from the file: re-running such
-a case needs the classifier named again (``regress --classifier``).
+A case file is data: nothing it names is imported from it. A failure classifier plug-in that a
+case names must be named again (``regress --classifier``); a controller or safety-layer plug-in
+must be named again (``--controller``, ``--safety-layer``) or the case's plug-ins trusted
+(``--trust-plugins``). The case's folder is never searched for modules.
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -32,7 +35,7 @@ import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import EnvOptions
-from hazardhunt.campaign.plugins import PluginSpec, make_classifier
+from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
 from hazardhunt.sut.plugins import PluginError
@@ -250,11 +253,14 @@ from hazardhunt.cases import case_files, regress_case
 {classifier_import}
 CASES = case_files(Path(__file__).parent)
 CLASSIFIER = {classifier}
+# True: the controller and safety-layer plug-ins the case files name are imported (as with
+# regress --trust-plugins); False: a case that names one is an error.
+TRUST_PLUGINS = {trust_plugins}
 
 
 @pytest.mark.parametrize("case", CASES, ids=[case.stem for case in CASES])
 def test_the_sut_no_longer_fails(case):
-    result = regress_case(case, classifier=CLASSIFIER)
+    result = regress_case(case, classifier=CLASSIFIER, trust_plugins=TRUST_PLUGINS)
     assert result.verdict == "fixed", (
         f"{{case.name}}: {{result.verdict}} ({{result.failure_class}} at {{result.sim_time:.2f}} s)"
     )
@@ -262,12 +268,17 @@ def test_the_sut_no_longer_fails(case):
 """The test module ``hazardhunt export --pytest`` writes next to the cases."""
 
 
-def write_pytest_module(out: Path, classifier: PluginSpec | None = None) -> Path:
+def write_pytest_module(
+    out: Path, classifier: PluginSpec | None = None, *, trust_plugins: bool = False
+) -> Path:
     """Write ``test_hazardhunt_cases.py`` into the cases folder ``out``; its tests classify
     failures with ``classifier`` (found next to the module or in the working directory), or
-    with the built-in classifier."""
+    with the built-in classifier, and import the controller and safety-layer plug-ins the cases
+    name only if ``trust_plugins`` (``TRUST_PLUGINS`` in the module)."""
     if classifier is None:
-        source = PYTEST_MODULE.format(classifier_import="", classifier="None")
+        source = PYTEST_MODULE.format(
+            classifier_import="", classifier="None", trust_plugins=trust_plugins
+        )
     else:
         source = PYTEST_MODULE.format(
             classifier_import="from hazardhunt.campaign.plugins import PluginSpec\n",
@@ -275,6 +286,7 @@ def write_pytest_module(out: Path, classifier: PluginSpec | None = None) -> Path
                 f"PluginSpec(\n    path={classifier.path!r},\n    params={classifier.params!r},\n"
                 "    search_path=[str(Path(__file__).parent), str(Path.cwd())],\n)"
             ),
+            trust_plugins=trust_plugins,
         )
     path = out / "test_hazardhunt_cases.py"
     path.write_text(source, encoding="utf-8")
@@ -300,16 +312,23 @@ def regress_case(
     safety_layer: PluginSpec | None = None,
     field: str | None = None,
     classifier: PluginSpec | None = None,
+    trust_plugins: bool = False,
+    announce: Callable[[str], None] | None = None,
 ) -> RegressionResult:
     """Re-run one case, against the given plug-ins and field setting instead of the case's.
 
-    The replayed failure is classified by ``classifier``, else by the built-in classifier. A
-    case whose class came from a classifier plug-in needs it given as ``classifier``: an import
-    path read from the case file is not imported.
+    Nothing the case file names is imported from it. Its controller and safety layer (when it
+    names plug-ins) are imported only when given again (the same import path confirms the
+    case's, with its parameters) or with ``trust_plugins``, and never from the case's folder;
+    ``announce`` is told which module is about to be imported. The replayed failure is
+    classified by ``classifier``, else by the built-in classifier; a case whose class came
+    from a classifier plug-in needs it given.
 
     Raises:
         CaseError: The file is not a valid case, or it names a classifier plug-in that is not
             given.
+        UntrustedPluginError: The case names a SUT plug-in that is neither given nor trusted;
+            nothing has been imported.
         PluginError: A plug-in does not load.
     """
     case = _read_case(path)
@@ -324,12 +343,12 @@ def regress_case(
         scenario = scenario_from_data(case.scenario, f"{path} [scenario]")
     except ScenarioError as error:
         raise CaseError(str(error)) from None
-    controller = controller or _plugin(path, case.sut.controller)
-    safety_layer = safety_layer or _plugin(path, case.sut.safety_layer)
     try:
         options = case.environment.options()
     except ValidationError as error:
         raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
+    controller = _allowed(path, case.sut, "controller", controller, trust_plugins, announce)
+    safety_layer = _allowed(path, case.sut, "safety_layer", safety_layer, trust_plugins, announce)
     try:
         simulation = build_simulation(
             scenario, field or case.environment.field, options, controller, safety_layer
@@ -395,12 +414,22 @@ def _problem(error: ValidationError) -> str:
     return problem
 
 
-def _plugin(path: Path, entry: _CasePlugin | None) -> PluginSpec | None:
-    """The case's own plug-in, importable from the case's folder or the working directory."""
-    if entry is None:
-        return None
-    return PluginSpec(
-        path=entry.path,
-        params=entry.params,
-        search_path=[str(path.parent.resolve()), str(Path.cwd())],
+def _allowed(
+    path: Path,
+    sut: _CaseSut,
+    key: str,
+    given: PluginSpec | None,
+    trust: bool,
+    announce: Callable[[str], None] | None,
+) -> PluginSpec | None:
+    """The plug-in to use for the case's ``sut.<key>`` (see
+    :func:`hazardhunt.campaign.plugins.allowed_plugin`)."""
+    stored: _CasePlugin | None = getattr(sut, key)
+    return allowed_plugin(
+        None if stored is None else PluginSpec(path=stored.path, params=stored.params),
+        given,
+        where=f"{path}: sut.{key}",
+        option=f"--{key.replace('_', '-')}",
+        trust=trust,
+        announce=announce,
     )
