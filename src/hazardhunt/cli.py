@@ -185,7 +185,7 @@ def run_command(
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
     from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
-    from hazardhunt.campaign.run import execute_run
+    from hazardhunt.campaign.run import RunFailed, execute_run
 
     tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
@@ -204,7 +204,11 @@ def run_command(
         )
     )
     check_plugins(config)
-    summary = execute_run(config, out, console=err_console)
+    try:
+        summary = execute_run(config, out, console=err_console)
+    except RunFailed as error:
+        err_console.print(f"[red]error:[/red] {escape(str(error))}")
+        raise typer.Exit(1) from None
     if json_output:
         print(json.dumps(summary))
     else:
