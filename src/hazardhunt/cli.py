@@ -325,6 +325,7 @@ def report(
 
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None
+    _warn_of_damaged_runs(directory)
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
@@ -354,12 +355,28 @@ def export(
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
+    _warn_of_damaged_runs(directory)
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
     if not written:
         console.print("the results hold no failure")
     if pytest_module:
         console.print(f"pytest module written to [bold]{write_pytest_module(out, spec)}[/bold]")
+
+
+def _warn_of_damaged_runs(directory: Path) -> None:
+    """Name the runs of a campaign directory left out because their files are damaged."""
+    from hazardhunt.analysis.results import ResultsError, damaged_runs
+
+    try:
+        damaged = damaged_runs(directory)
+    except ResultsError:
+        return  # the command reports it
+    for run_id, damage in damaged.items():
+        err_console.print(
+            f"[yellow]warning:[/yellow] run {escape(run_id)} is damaged ({escape(damage)}) and "
+            "left out; running the campaign again redoes it"
+        )
 
 
 @app.command()
