@@ -194,7 +194,7 @@ def run_command(
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
     from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
-    from hazardhunt.campaign.run import execute_run
+    from hazardhunt.campaign.run import RunFailed, execute_run
 
     tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
@@ -213,7 +213,11 @@ def run_command(
         )
     )
     check_plugins(config)
-    summary = execute_run(config, out, console=err_console)
+    try:
+        summary = execute_run(config, out, console=err_console)
+    except RunFailed as error:
+        err_console.print(f"[red]error:[/red] {escape(str(error))}")
+        raise typer.Exit(1) from None
     if json_output:
         print(json.dumps(summary))
     else:
@@ -370,6 +374,7 @@ def report(
 
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None
+    _warn_of_damaged_runs(directory)
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
@@ -410,6 +415,7 @@ def export(
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
+    _warn_of_damaged_runs(directory)
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
     if not written:
@@ -417,6 +423,21 @@ def export(
     if pytest_module:
         module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
         console.print(f"pytest module written to [bold]{module}[/bold]")
+
+
+def _warn_of_damaged_runs(directory: Path) -> None:
+    """Name the runs of a campaign directory left out because their files are damaged."""
+    from hazardhunt.analysis.results import ResultsError, damaged_runs
+
+    try:
+        damaged = damaged_runs(directory)
+    except ResultsError:
+        return  # the command reports it
+    for run_id, damage in damaged.items():
+        err_console.print(
+            f"[yellow]warning:[/yellow] run {escape(run_id)} is damaged ({escape(damage)}) and "
+            "left out; running the campaign again redoes it"
+        )
 
 
 @app.command()

@@ -1,6 +1,6 @@
 """``hazardhunt report DIR``: the study's figures and tables from a run or campaign directory.
 
-Writes ``DIR/report/``::
+Writes ``DIR/report/`` (into a hidden sibling first, renamed into place once complete)::
 
     index.html       self-contained (images inlined): opens offline, can be mailed
     summary.json     per run and per table, machine-readable
@@ -16,6 +16,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import os
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -120,17 +121,35 @@ def write_report(
 
     With a ``classifier``, every failure is classified anew from its stored trajectory (for
     another taxonomy, or runs recorded with an older one); otherwise the recorded classes count.
+    Runs whose files are damaged are left out and named in the report. The report is written
+    into a hidden sibling of ``report/`` and replaces it only once complete: a report that
+    fails (a full disk) leaves the previous one, if any, and nothing else.
 
     Raises:
-        ResultsError: When the directory holds no finished run.
+        ResultsError: When the directory holds no complete run.
     """
     tell = progress if progress is not None else (lambda step: None)
     tell("reading results")
     results = load_results(directory, classifier)
-    report = _Report(directory / "report")
-    for stale in (report.figures, report.directory / "tables"):
-        shutil.rmtree(stale, ignore_errors=True)  # from an earlier report of fewer runs
-    report.directory.mkdir(exist_ok=True)
+    final = directory / "report"
+    _remove_leftovers(directory)
+    scratch = directory / f".report-{os.getpid()}.partial"
+    shutil.rmtree(scratch, ignore_errors=True)
+    try:
+        report = _Report(scratch)
+        report.directory.mkdir()
+        _write_sections(report, results, tell)
+        tell("writing index.html")
+        write_json_atomic(report.directory / "summary.json", _summary(results, report))
+        write_bytes_atomic(report.directory / "index.html", _page(results, report).encode())
+        _put_in_place(scratch, final)
+    except BaseException:
+        shutil.rmtree(scratch, ignore_errors=True)  # a full disk keeps no half report
+        raise
+    return final / "index.html"
+
+
+def _write_sections(report: _Report, results: Results, tell: Progress) -> None:
     tell("failures per run")
     _failures_per_run(report, results)
     tell("failure classes")
@@ -152,12 +171,33 @@ def write_report(
     tell("failure rates")
     _rates(report, results)
     _runs(report, results)
-    tell("writing index.html")
-    summary = _summary(results, report)
-    write_json_atomic(report.directory / "summary.json", summary)
-    index = report.directory / "index.html"
-    write_bytes_atomic(index, _page(results, report).encode())
-    return index
+
+
+def _put_in_place(written: Path, final: Path) -> None:
+    """Replace the report ``final`` (if any) by the complete one ``written``."""
+    previous = final.with_name(f".report-{os.getpid()}.previous")
+    if final.exists():
+        final.rename(previous)
+    written.rename(final)
+    shutil.rmtree(previous, ignore_errors=True)
+
+
+def _remove_leftovers(directory: Path) -> None:
+    """Remove what reports that were killed left behind (not those of a report still running)."""
+    for leftover in directory.glob(".report-*.*"):
+        pid = leftover.name.removeprefix(".report-").partition(".")[0]
+        if pid.isdigit() and not _running(int(pid)):
+            shutil.rmtree(leftover, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass  # another user's process
+    return True
 
 
 # ------------------------------------------------------------------ sections
@@ -510,6 +550,11 @@ def _runs(report: _Report, results: Results) -> None:
             f'<p class="warning">{len(results.unfinished)} runs of the campaign have not '
             f"finished and are left out: {html.escape(', '.join(results.unfinished))}.</p>"
         )
+    for run_id, damage in results.damaged.items():
+        section.parts.append(
+            f'<p class="warning">Run {html.escape(run_id)} is damaged and left out: '
+            f"{html.escape(damage)}. Running the campaign again redoes it.</p>"
+        )
 
 
 # ------------------------------------------------------------------ outputs
@@ -524,6 +569,7 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
         "hazardhunt_version": hazardhunt.__version__,
         "runs": records(report.tables["runs"]),
         "unfinished_runs": results.unfinished,
+        "damaged_runs": results.damaged,
         "lesson_1": {
             str(row["tester"]): {
                 "more_failures_than_random": int(row[f"more failures than {STUDY_BASELINE}"]),

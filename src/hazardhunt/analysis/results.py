@@ -13,7 +13,8 @@ from pydantic import ValidationError
 
 from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
-from hazardhunt.campaign.run import is_complete
+from hazardhunt.campaign.run import is_finished
+from hazardhunt.campaign.store import find_damage
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
@@ -47,6 +48,9 @@ class Results:
     """One row per episode flagged as loitering (``loitering.parquet``), with the run's keys."""
     unfinished: list[str] = field(default_factory=list)
     """Run ids of the campaign that have not finished (they are left out of every table)."""
+    damaged: dict[str, str] = field(default_factory=dict)
+    """Run ids of the campaign whose files do not match the checksums they recorded (or do not
+    read back), with what is wrong; they are left out of every table."""
     classifier: FailureClassifier | None = MechanismClassifier()
     """The taxonomy of the ``class`` column: the classifier that classified the failures anew,
     else the built-in one if every run recorded it, else None (runs classified by a plug-in
@@ -86,25 +90,16 @@ def load_results(directory: Path, classifier: FailureClassifier | None = None) -
             classifier (None: keep the classes recorded with the runs).
 
     Raises:
-        ResultsError: When ``directory`` is neither, or nothing in it has finished.
+        ResultsError: When ``directory`` is neither, or nothing in it is complete, or it is a
+            run whose files are damaged. A campaign's damaged runs are left out and listed in
+            ``damaged``.
     """
-    if not directory.is_dir():
-        raise ResultsError(f"{directory}: no such directory")
-    if (directory / "campaign.json").is_file():
-        run_directories, unfinished = _campaign_runs(directory)
-    elif (directory / "config.json").is_file():
-        if not is_complete(directory):
-            raise ResultsError(f"{directory}: the run has not finished (no summary.json)")
-        run_directories, unfinished = [directory], []
-    else:
-        raise ResultsError(
-            f"{directory}: not a run or campaign directory (no config.json or campaign.json)"
-        )
+    run_directories, unfinished, damaged = _finished_runs(directory)
     if not run_directories:
-        raise ResultsError(f"{directory}: no run of the campaign has finished yet")
+        raise ResultsError(f"{directory}: {_why(damaged)}")
     summaries = [_read_json(path / "summary.json") for path in run_directories]
     configs = [_read_json(path / "config.json") for path in run_directories]
-    runs = pd.DataFrame(summaries)
+    runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
     runs["directory"] = [str(path) for path in run_directories]
     runs["reward"] = [config.get("reward") for config in configs]
     runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
@@ -118,9 +113,13 @@ def load_results(directory: Path, classifier: FailureClassifier | None = None) -
             for config, path in zip(configs, run_directories, strict=True)
         ]
         recorded = MechanismClassifier() if all(p is None for p in plugins) else None
-        return Results(directory, runs, unfinished=unfinished, classifier=recorded, **tables)
+        return Results(
+            directory, runs, unfinished=unfinished, damaged=damaged, classifier=recorded, **tables
+        )
     tables["failures"] = _reclassified(tables["failures"], runs, classifier)
-    return Results(directory, runs, unfinished=unfinished, classifier=classifier, **tables)
+    return Results(
+        directory, runs, unfinished=unfinished, damaged=damaged, classifier=classifier, **tables
+    )
 
 
 def _reclassified(
@@ -158,16 +157,59 @@ def recorded_classifier(config: dict[str, Any], path: Path) -> PluginSpec | None
         raise ResultsError(f"{path}: run.{format_validation_error(error)}") from None
 
 
-def _campaign_runs(directory: Path) -> tuple[list[Path], list[str]]:
+def damaged_runs(directory: Path) -> dict[str, str]:
+    """The finished runs of a run or campaign directory whose files are damaged: run id -> what
+    is wrong (what :func:`load_results` leaves out, or refuses for a run directory).
+
+    Raises:
+        ResultsError: When ``directory`` is neither a run nor a campaign directory.
+    """
+    return _finished_runs(directory)[2]
+
+
+def _finished_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, str]]:
+    """The directories of the complete runs of a run or campaign directory, the run ids of the
+    unfinished ones and, per damaged run, what is wrong with it.
+
+    Raises:
+        ResultsError: When ``directory`` is neither, or is a run that is not complete.
+    """
+    if not directory.is_dir():
+        raise ResultsError(f"{directory}: no such directory")
+    if (directory / "campaign.json").is_file():
+        return _campaign_runs(directory)
+    if not (directory / "config.json").is_file():
+        raise ResultsError(
+            f"{directory}: not a run or campaign directory (no config.json or campaign.json)"
+        )
+    if not is_finished(directory):
+        raise ResultsError(f"{directory}: the run has not finished (no summary.json)")
+    damage = find_damage(directory)
+    if damage is not None:
+        raise ResultsError(f"{directory}: the run is damaged ({damage}); run it again")
+    return [directory], [], {}
+
+
+def _campaign_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, str]]:
     config = CampaignConfig.model_validate(_read_json(directory / "campaign.json"))
-    finished, unfinished = [], []
+    complete, unfinished, damaged = [], [], {}
     for run in config.runs():
         path = directory / "runs" / run.run_id
-        if is_complete(path):
-            finished.append(path)
-        else:
+        if not is_finished(path):
             unfinished.append(run.run_id)
-    return finished, unfinished
+        elif (damage := find_damage(path)) is not None:
+            damaged[run.run_id] = damage
+        else:
+            complete.append(path)
+    return complete, unfinished, damaged
+
+
+def _why(damaged: dict[str, str]) -> str:
+    """Why no run of a campaign can be read."""
+    if not damaged:
+        return "no run of the campaign has finished yet"
+    found = "; ".join(f"{run_id} is damaged ({damage})" for run_id, damage in damaged.items())
+    return f"no run of the campaign is complete: {found}"
 
 
 def _stacked(

@@ -9,18 +9,21 @@ Layout of a campaign directory::
     .lock                      held (``flock``) by the one campaign process writing the directory
 
 A run directory appears under its name only once the run is complete, so resuming is: keep the
-complete runs, delete the partial ones and run them again. Runs are deterministic per seed, so a
-redone run loses nothing and counts nothing twice.
+complete runs whose files match the checksums they recorded, delete the partial and damaged
+ones and run them again. Runs are deterministic per seed, so a redone run loses nothing and
+counts nothing twice. A run whose worker process dies (killed by the out-of-memory killer, say)
+is started again in a new worker, up to ``WORKER_DEATH_RETRIES`` times.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
-import fcntl
 import io
 import json
 import logging
 import multiprocessing
+import multiprocessing.connection
 import os
 import shutil
 import signal
@@ -30,14 +33,13 @@ import tarfile
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from contextlib import contextmanager
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from multiprocessing.queues import Queue
+from multiprocessing.connection import Connection
+from multiprocessing.context import SpawnContext, SpawnProcess
 from pathlib import Path
-from queue import Empty
 from typing import Any
 
 from pydantic import ValidationError
@@ -55,14 +57,15 @@ from rich.table import Table
 
 import hazardhunt
 from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
+from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.run import (
     RunProgress,
     execute_run_atomically,
-    is_complete,
+    is_finished,
     partial_directory,
     record_run,
 )
-from hazardhunt.campaign.store import write_json_atomic
+from hazardhunt.campaign.store import find_damage, write_json_atomic
 
 EXECUTORS = ("local", "ray")
 """Where runs execute: a local process pool, or a Ray cluster."""
@@ -70,17 +73,27 @@ EXECUTORS = ("local", "ray")
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
 
+WORKER_DEATH_RETRIES = 2
+"""Times a run is started again, in a new worker process, after the process executing it died
+(killed by a signal, say the out-of-memory killer's SIGKILL) before it is recorded as failed."""
+
 _PR_SET_PDEATHSIG = 1
 
 
 class CampaignFailed(Exception):  # noqa: N818 - names an outcome, as the command reports it
-    """Some runs raised while the others completed; ``summary`` records which and why."""
+    """Some runs raised while the others completed (``summary`` records which and why), or the
+    campaign's ``summary.json`` could not be written."""
 
-    def __init__(self, summary: dict[str, Any]) -> None:
+    def __init__(self, summary: dict[str, Any], reason: str | None = None) -> None:
         super().__init__(
-            f"{summary['runs_failed']} of {summary['runs_total']} runs raised (see summary.json)"
+            reason
+            or f"{summary['runs_failed']} of {summary['runs_total']} runs raised (see summary.json)"
         )
         self.summary = summary
+
+
+class WorkerDied(RuntimeError):  # noqa: N818 - names an outcome, as summary.json reports it
+    """The process executing a run ended without finishing it, every time it was tried."""
 
 
 @dataclass(frozen=True)
@@ -128,7 +141,8 @@ def run_campaign(
     Raises:
         ConfigError: ``out`` holds another campaign or something else, or another campaign
             process is writing it; nothing is written then.
-        CampaignFailed: After all other runs finished, if some runs raised.
+        CampaignFailed: After all other runs finished, if some runs raised (or their workers
+            died every time they were tried), or if ``summary.json`` could not be written.
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, not {executor!r}")
@@ -138,7 +152,7 @@ def run_campaign(
     _check_run_ids(runs)
     _check_directory(config, out)
     out.mkdir(parents=True, exist_ok=True)
-    with _exclusive_lock(out):
+    with exclusive_lock(out / ".lock", out, "campaign"):
         _check_directory(config, out)  # another campaign may have claimed it before our lock
         if not (out / "campaign.json").exists():
             write_json_atomic(out / "campaign.json", config.model_dump(mode="json"))
@@ -147,6 +161,7 @@ def run_campaign(
         for leftover in runs_directory.glob(".*.partial"):
             shutil.rmtree(leftover)
         ledger = _Ledger(config, runs, out)
+        _redo_damaged(ledger, runs_directory, console)
         _warn_of_other_versions(ledger, console)
         pending = [run for run in runs if ledger.status(run) != "complete"]
         if pending:
@@ -154,9 +169,28 @@ def run_campaign(
         summary = ledger.write()
     if console is not None:
         _print_report(console, summary, out)
+    if ledger.write_error is not None:
+        reason = (
+            f"{ledger.path}: could not be written ({ledger.write_error}); the complete runs are "
+            "kept under runs/: run the same command again to write it"
+        )
+        if console is not None:
+            console.print(f"[red]error:[/red] {escape(reason)}")
+        raise CampaignFailed(summary, reason)
     if summary["runs_failed"]:
         raise CampaignFailed(summary)
     return summary
+
+
+def _redo_damaged(ledger: _Ledger, runs_directory: Path, console: Console | None) -> None:
+    """Remove the finished runs whose files are damaged, so that they are run again."""
+    for run_id, damage in ledger.damaged.items():
+        if console is not None:
+            console.print(
+                f"[yellow]warning:[/yellow] run {escape(run_id)} is damaged ({escape(damage)}); "
+                "running it again"
+            )
+        shutil.rmtree(runs_directory / run_id)
 
 
 def _warn_of_other_versions(ledger: _Ledger, console: Console | None) -> None:
@@ -213,44 +247,34 @@ def _first_difference(stored: CampaignConfig, given: CampaignConfig) -> str:
     return f"{key}: there {stored_values[key]!r}, here {given_values[key]!r}"
 
 
-@contextmanager
-def _exclusive_lock(out: Path) -> Iterator[None]:
-    """Hold ``out/.lock``; the kernel drops the lock when the process dies, however it dies."""
-    with open(out / ".lock", "a+") as handle:
-        try:
-            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.seek(0)
-            holder = handle.read().strip() or "?"
-            raise ConfigError(
-                f"{out}: another campaign (pid {holder}) is writing this directory"
-            ) from None
-        handle.truncate(0)
-        handle.write(f"{os.getpid()}\n")
-        handle.flush()
-        yield
-
-
 class _Ledger:
     """The campaign's ``summary.json``: how every run stands, rewritten after each change.
 
     Complete runs are read back from their own directories, so the ledger of a resumed campaign
-    is right even if the previous campaign process died between a run and its ledger update.
+    is right even if the previous campaign process died between a run and its ledger update. A
+    finished run whose files do not match its checksums is ``damaged`` and pending.
     """
 
     def __init__(self, config: CampaignConfig, runs: list[RunConfig], out: Path) -> None:
         self.config = config
         self.path = out / "summary.json"
         self.entries: dict[str, dict[str, Any]] = {}
+        self.damaged: dict[str, str] = {}
+        """Run id -> what is wrong with its files."""
+        self.write_error: OSError | None = None
+        """Why the last write of ``summary.json`` failed; None once one succeeded."""
         for run in runs:
             directory = out / "runs" / run.run_id
-            if is_complete(directory):
-                stored = json.loads((directory / "summary.json").read_text())
-                self.entries[run.run_id] = {"status": "complete"} | stored
+            if is_finished(directory):
+                damage = find_damage(directory)
+                if damage is None:
+                    stored = json.loads((directory / "summary.json").read_text())
+                    self.entries[run.run_id] = {"status": "complete"} | _ledger_entry(stored)
+                    continue
+                self.damaged[run.run_id] = damage
             elif directory.exists():
                 raise ConfigError(f"{directory}: not a complete run; delete it to redo the run")
-            else:
-                self.entries[run.run_id] = {"status": "pending"} | _run_keys(run)
+            self.entries[run.run_id] = {"status": "pending"} | _run_keys(run)
         self.write()
 
     def status(self, run: RunConfig) -> str:
@@ -261,7 +285,7 @@ class _Ledger:
         """Store how a run ended and rewrite ``summary.json``."""
         run = outcome.config
         if outcome.summary is not None:
-            entry = {"status": "complete"} | outcome.summary
+            entry = {"status": "complete"} | _ledger_entry(outcome.summary)
         else:
             failure = {"error": outcome.error, "traceback": outcome.traceback}
             entry = {"status": "failed"} | _run_keys(run) | failure
@@ -285,10 +309,24 @@ class _Ledger:
         }
 
     def write(self) -> dict[str, Any]:
-        """Rewrite ``summary.json`` atomically; the summary written."""
+        """Rewrite ``summary.json`` atomically; the summary meant to be written.
+
+        A write that fails (a full disk) is remembered in ``write_error`` rather than raised:
+        the runs go on, and the next write tries again.
+        """
         summary = self.summary()
-        write_json_atomic(self.path, summary)
+        try:
+            write_json_atomic(self.path, summary)
+        except OSError as error:
+            self.write_error = error
+        else:
+            self.write_error = None
         return summary
+
+
+def _ledger_entry(summary: dict[str, Any]) -> dict[str, Any]:
+    """A run's summary as the ledger keeps it: without the checksums of its files."""
+    return {key: value for key, value in summary.items() if key != "checksums"}
 
 
 def _run_keys(run: RunConfig) -> dict[str, Any]:
@@ -324,17 +362,35 @@ def _execute(
         display = _ProgressDisplay(progress, ledger, pending, show_episodes=executor == "local")
 
         def on_outcome(outcome: RunOutcome) -> None:
+            unwritten = ledger.write_error
             ledger.record(outcome)
             display.run_ended(outcome)
-            if outcome.summary is None and console is not None:
+            if console is None:
+                return
+            if outcome.summary is None:
                 console.print(
                     f"[red]run {outcome.config.run_id} failed:[/red] {escape(str(outcome.error))}"
+                )
+            if ledger.write_error is not None and unwritten is None:
+                console.print(
+                    f"[red]{escape(str(ledger.path))} could not be written:[/red] "
+                    f"{escape(str(ledger.write_error))}; it is tried again after each run"
+                )
+
+        def on_retry(run: RunConfig, how: str, attempt: int) -> None:
+            display.run_restarted(run.run_id)
+            if console is not None:
+                console.print(
+                    f"[yellow]run {run.run_id}: its worker process {how}; starting it again "
+                    f"(attempt {attempt} of {WORKER_DEATH_RETRIES + 1})[/yellow]"
                 )
 
         if executor == "ray":
             _execute_on_ray(pending, runs_directory, workers, address, on_outcome)
         else:
-            _execute_locally(pending, runs_directory, workers, display.episodes_done, on_outcome)
+            _execute_locally(
+                pending, runs_directory, workers, display.episodes_done, on_outcome, on_retry
+            )
 
 
 class _ProgressDisplay:
@@ -362,6 +418,11 @@ class _ProgressDisplay:
         if run_id not in self.ended:
             self.in_flight[run_id] = max(self.in_flight.get(run_id, 0), episodes_done)
             self._show_episodes()
+
+    def run_restarted(self, run_id: str) -> None:
+        """A run starts again from its first episode."""
+        self.in_flight.pop(run_id, None)
+        self._show_episodes()
 
     def run_ended(self, outcome: RunOutcome) -> None:
         """A run completed or raised."""
@@ -391,62 +452,185 @@ def _failed(run: RunConfig, error: BaseException) -> RunOutcome:
 # --- local executor ----------------------------------------------------------------------------
 
 
+OnRetry = Callable[[RunConfig, str, int], None]
+"""Called with a run whose worker process died, how it died, and the attempt about to start."""
+
+
 def _execute_locally(
     runs: list[RunConfig],
     runs_directory: Path,
     workers: int,
     on_episodes: OnEpisodes,
     on_outcome: OnOutcome,
+    on_retry: OnRetry,
 ) -> None:
-    """Execute ``runs`` in a pool of spawned worker processes that die with this process."""
+    """Execute ``runs`` in up to ``workers`` spawned worker processes that die with this one.
+
+    A worker that dies takes only its own run with it: a new worker takes its place, and the
+    run is started again up to ``WORKER_DEATH_RETRIES`` times before it is recorded as failed
+    with how its worker died.
+    """
     context = multiprocessing.get_context("spawn")
-    progress_queue: Queue[tuple[str, int]] = context.Queue()
-    pool = ProcessPoolExecutor(
-        max_workers=min(workers, len(runs)),
-        mp_context=context,
-        initializer=_initialize_worker,
-        initargs=(os.getpid(), progress_queue),
-    )
+    queue = deque(runs)
+    deaths: dict[str, int] = {}
+    pool: list[_Worker] = []
     try:
-        futures = {pool.submit(_run_in_worker, run, runs_directory): run for run in runs}
-        waiting: set[Future[dict[str, Any]]] = set(futures)
-        while waiting:
-            done, waiting = wait(waiting, timeout=PROGRESS_INTERVAL_S, return_when=FIRST_COMPLETED)
-            _drain(progress_queue, on_episodes)
-            for future in done:
-                run = futures[future]
-                try:
-                    outcome = RunOutcome(run, future.result())
-                except Exception as error:
-                    outcome = _failed(run, error)
-                on_outcome(outcome)
+        while queue or pool:
+            pool = _assign(pool, queue, workers, context, runs_directory)
+            handles = [w.connection for w in pool] + [w.process.sentinel for w in pool]
+            ready = multiprocessing.connection.wait(handles, PROGRESS_INTERVAL_S)
+            for worker in [w for w in pool if {w.connection, w.process.sentinel} & set(ready)]:
+                outcome = worker.receive(on_episodes)
+                if outcome is not None:
+                    on_outcome(outcome)
+                if not worker.alive:
+                    pool.remove(worker)
+                    _worker_died(worker, runs_directory, queue, deaths, on_outcome, on_retry)
     except BaseException:
         # Without this, leaving (Ctrl-C) would wait for every run in flight to finish.
-        processes = list((pool._processes or {}).values())  # public only from Python 3.14
-        for process in processes:
-            process.kill()
-        pool.shutdown(wait=False, cancel_futures=True)
+        for worker in pool:
+            worker.process.kill()
         raise
-    pool.shutdown()
-    progress_queue.close()
 
 
-def _drain(progress_queue: Queue[tuple[str, int]], on_episodes: OnEpisodes) -> None:
+def _assign(
+    pool: list[_Worker],
+    queue: deque[RunConfig],
+    workers: int,
+    context: SpawnContext,
+    runs_directory: Path,
+) -> list[_Worker]:
+    """The pool once every idle worker has a queued run, new workers (up to ``workers``) have
+    the others, and the workers left idle are stopped."""
+    kept = []
+    for worker in pool:
+        if worker.run is None:
+            if not queue:
+                worker.stop()
+                continue
+            worker.assign(queue.popleft())
+        kept.append(worker)
+    while queue and len(kept) < workers:
+        worker = _Worker.start(context, runs_directory)
+        worker.assign(queue.popleft())
+        kept.append(worker)
+    return kept
+
+
+def _worker_died(
+    worker: _Worker,
+    runs_directory: Path,
+    queue: deque[RunConfig],
+    deaths: dict[str, int],
+    on_outcome: OnOutcome,
+    on_retry: OnRetry,
+) -> None:
+    """Queue the run of a dead worker again, or record it as failed after too many deaths;
+    either way, remove what it left of the run."""
+    run, how = worker.run, worker.death()
+    if run is None:
+        return
+    shutil.rmtree(partial_directory(runs_directory / run.run_id), ignore_errors=True)
+    deaths[run.run_id] = attempts = deaths.get(run.run_id, 0) + 1
+    if attempts <= WORKER_DEATH_RETRIES:
+        on_retry(run, how, attempts + 1)
+        queue.appendleft(run)
+    else:
+        error = WorkerDied(f"its worker process {how}, on each of {attempts} attempts")
+        on_outcome(_failed(run, error))
+
+
+class _Worker:
+    """A worker process of the local executor: executes the runs it is sent, one at a time,
+    and sends back progress reports and each run's outcome over its own pipe (so that a
+    worker killed mid-message disturbs no other)."""
+
+    def __init__(self, process: SpawnProcess, connection: Connection) -> None:
+        self.process = process
+        self.connection = connection
+        self.run: RunConfig | None = None
+        """The run it executes; None while idle."""
+        self.alive = True
+        """False once its process has ended."""
+
+    @classmethod
+    def start(cls, context: SpawnContext, runs_directory: Path) -> _Worker:
+        """A new worker process."""
+        connection, worker_end = context.Pipe()
+        process = context.Process(
+            target=_serve, args=(worker_end, os.getpid(), runs_directory), name="hazardhunt-run"
+        )
+        process.start()
+        worker_end.close()  # so that the worker's death reads as the end of the pipe
+        return cls(process, connection)
+
+    def assign(self, run: RunConfig) -> None:
+        """Send it ``run`` to execute."""
+        self.run = run
+        with contextlib.suppress(OSError):  # a worker that died is found so by ``receive``
+            self.connection.send(run)
+
+    def receive(self, on_episodes: OnEpisodes) -> RunOutcome | None:
+        """Read what the worker sent: progress reports, and its run's outcome once it ended;
+        ``alive`` turns False if its process has ended."""
+        outcome = None
+        try:
+            while self.connection.poll():
+                message = self.connection.recv()
+                if isinstance(message, RunOutcome):
+                    outcome, self.run = message, None
+                else:
+                    on_episodes(*message)
+        except (EOFError, OSError):
+            self.alive = False
+        if not self.process.is_alive():
+            self.alive = False
+        return outcome
+
+    def death(self) -> str:
+        """How its process ended, once it has: "was killed by SIGKILL", "exited with code 1"."""
+        self.process.join()
+        code = self.process.exitcode or 0
+        if code < 0:
+            return f"was killed by {signal.Signals(-code).name}"
+        return f"exited with code {code}"
+
+    def stop(self) -> None:
+        """Tell the idle worker to exit, and wait until it has."""
+        with contextlib.suppress(OSError):
+            self.connection.send(None)
+        self.process.join(timeout=30)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.connection.close()
+
+
+# The worker's end of its pipe to the campaign process, for progress reports.
+_connection: Connection | None = None
+
+
+def _serve(connection: Connection, campaign_pid: int, runs_directory: Path) -> None:
+    """A worker process: execute each run the campaign process sends until it sends None."""
+    global _connection
+    _initialize_worker(campaign_pid)
+    _connection = connection
     while True:
         try:
-            run_id, episodes_done = progress_queue.get_nowait()
-        except Empty:
+            run = connection.recv()
+        except EOFError:  # the campaign process is gone
             return
-        on_episodes(run_id, episodes_done)
+        if run is None:
+            return
+        try:
+            outcome = RunOutcome(run, _run_in_worker(run, runs_directory))
+        except Exception as error:
+            outcome = _failed(run, error)
+        connection.send(outcome)
 
 
-# The worker's end of the progress queue: a spawned process can only receive it at start-up.
-_progress_queue: Queue[tuple[str, int]] | None = None
-
-
-def _initialize_worker(campaign_pid: int, progress_queue: Queue[tuple[str, int]]) -> None:
+def _initialize_worker(campaign_pid: int) -> None:
     """Tie the worker's life to the campaign process, so that no orphan goes on writing."""
-    global _progress_queue
     if sys.platform == "linux":
         libc = ctypes.CDLL("libc.so.6", use_errno=True)
         if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL) != 0:
@@ -456,8 +640,6 @@ def _initialize_worker(campaign_pid: int, progress_queue: Queue[tuple[str, int]]
         os._exit(1)
     # Ctrl-C is the campaign process's to handle: it kills the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    progress_queue.cancel_join_thread()  # an unread progress report must not block exit
-    _progress_queue = progress_queue
 
 
 def _run_in_worker(run: RunConfig, runs_directory: Path) -> dict[str, Any]:
@@ -471,9 +653,9 @@ def _progress_reporter(run_id: str) -> Callable[[RunProgress], None]:
     def report(state: RunProgress) -> None:
         nonlocal last_report
         now = time.monotonic()
-        if _progress_queue is not None and now - last_report >= PROGRESS_INTERVAL_S:
+        if _connection is not None and now - last_report >= PROGRESS_INTERVAL_S:
             last_report = now
-            _progress_queue.put_nowait((run_id, state.episodes_done))
+            _connection.send((run_id, state.episodes_done))
 
     return report
 
@@ -502,7 +684,8 @@ def _execute_on_ray(
     )
     pending: dict[Any, RunConfig] = {}
     try:
-        task = ray.remote(num_cpus=1)(_run_packed)
+        # Ray starts a task whose worker died again by itself, as many times as ours.
+        task = ray.remote(num_cpus=1, max_retries=WORKER_DEATH_RETRIES)(_run_packed)
         pending = {task.remote(run): run for run in runs}
         while pending:
             # One at a time, so that a kill loses no run that already came back.
@@ -515,7 +698,12 @@ def _execute_on_ray(
                 cause = getattr(error, "cause", None) or error
                 on_outcome(RunOutcome(run, None, f"{type(cause).__name__}: {cause}", str(error)))
                 continue
-            on_outcome(RunOutcome(run, _unpack(archive, runs_directory / run.run_id)))
+            try:
+                summary = _unpack(archive, runs_directory / run.run_id)
+            except (OSError, RuntimeError) as error:
+                on_outcome(_failed(run, error))
+                continue
+            on_outcome(RunOutcome(run, summary))
     except BaseException:
         for reference in pending:
             ray.cancel(reference, force=True)
@@ -537,19 +725,31 @@ def _run_packed(run: RunConfig) -> bytes:
 
 
 def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
-    """Unpack a run's archive into its partial directory, rename it into place; its summary."""
+    """Unpack a run's archive into its partial directory, rename it into place; its summary.
+
+    Raises:
+        OSError: It could not be written (the partial directory is removed).
+        RuntimeError: The archive holds no complete run.
+    """
     partial = partial_directory(final)
     if partial.exists():
         shutil.rmtree(partial)
-    partial.mkdir()
-    with tarfile.open(fileobj=io.BytesIO(archive)) as members:
-        if hasattr(tarfile, "data_filter"):
-            members.extractall(partial, filter="data")
-        else:  # pragma: no cover - Python < 3.10.12, and the archive is our own
-            members.extractall(partial)
-    if not is_complete(partial):
-        raise RuntimeError(f"{final.name}: the run's archive holds no summary.json")
-    partial.rename(final)
+    try:
+        partial.mkdir()
+        with tarfile.open(fileobj=io.BytesIO(archive)) as members:
+            if hasattr(tarfile, "data_filter"):
+                members.extractall(partial, filter="data")
+            else:  # pragma: no cover - Python < 3.10.12, and the archive is our own
+                members.extractall(partial)
+        if not is_finished(partial):
+            raise RuntimeError(f"{final.name}: the run's archive holds no summary.json")
+        damage = find_damage(partial)
+        if damage is not None:
+            raise RuntimeError(f"{final.name}: the run's archive is damaged ({damage})")
+        partial.rename(final)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
     summary: dict[str, Any] = json.loads((final / "summary.json").read_text())
     return summary
 

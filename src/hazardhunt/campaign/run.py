@@ -2,10 +2,11 @@
 
 Three ways to execute a run, from the outside in:
 
-- :func:`execute_run`: what ``hazardhunt run`` calls; keeps a finished run of the same
-  configuration, refuses anything else in the way, shows a progress bar;
+- :func:`execute_run`: what ``hazardhunt run`` calls; holds a lock next to the run directory,
+  keeps a finished run of the same configuration (redoes it if its files are damaged), refuses
+  anything else in the way, shows a progress bar;
 - :func:`execute_run_atomically`: writes into a hidden partial directory and renames it into
-  place once complete (what each run of a campaign does);
+  place once complete, or removes it if the run fails (what each run of a campaign does);
 - :func:`record_run`: writes the run's files into a new directory (the two above, and Ray's
   workers, call it).
 """
@@ -35,6 +36,7 @@ from rich.progress import (
 
 import hazardhunt
 from hazardhunt.campaign.config import ConfigError, EnvOptions, RunConfig
+from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.plugins import (
     PluginSpec,
     make_classifier,
@@ -42,7 +44,7 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
-from hazardhunt.campaign.store import RunStore, write_json_atomic
+from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import OTHER
@@ -114,7 +116,8 @@ def record_run(
     """Run ``config`` and write its results into ``directory`` (created; must not exist).
 
     Returns:
-        The run's summary, also written as ``summary.json`` (the last file written).
+        The run's summary, also written as ``summary.json`` (the last file written), with the
+        checksums of the other files.
     """
     directory.mkdir(parents=True)
     started_at = datetime.now(timezone.utc).isoformat()
@@ -164,6 +167,7 @@ def record_run(
     store.close()
     wall_time = time.perf_counter() - clock
     summary = _run_summary(config, store, simulation.field, wall_time, started_at)
+    summary["checksums"] = file_checksums(directory)
     write_json_atomic(directory / "summary.json", summary)
     return summary
 
@@ -202,9 +206,18 @@ _OUTCOME_COUNTS = ("failure", "safe_contact", "stall", "timeout", "goal", "sut_e
 """Outcomes the run summary counts, each as ``<outcome>s``."""
 
 
-def is_complete(directory: Path) -> bool:
-    """Whether a run directory holds a finished run."""
+class RunFailed(Exception):  # noqa: N818 - names an outcome, as the command reports it
+    """A run could not write its results (a full disk, say); nothing of it was kept."""
+
+
+def is_finished(directory: Path) -> bool:
+    """Whether a run directory holds a finished run (its files may still be damaged)."""
     return (directory / "summary.json").is_file()
+
+
+def is_complete(directory: Path) -> bool:
+    """Whether a run directory holds a finished run whose files are as it wrote them."""
+    return is_finished(directory) and find_damage(directory) is None
 
 
 def partial_directory(out: Path) -> Path:
@@ -216,12 +229,26 @@ def execute_run_atomically(
     config: RunConfig, out: Path, progress: ProgressCallback | None = None
 ) -> dict[str, Any]:
     """Execute ``config`` into the hidden partial sibling of ``out`` (discarding any leftover
-    there) and rename it to ``out`` once complete; the run's summary."""
+    there) and rename it to ``out`` once complete; the run's summary.
+
+    Raises:
+        RunFailed: Its results could not be written (``OSError``); the partial directory is
+            removed, whatever the run raised.
+    """
     partial = partial_directory(out)
     if partial.exists():
         shutil.rmtree(partial)
-    summary = record_run(config, partial, progress)
-    partial.rename(out)
+    try:
+        summary = record_run(config, partial, progress)
+        partial.rename(out)
+    except OSError as error:
+        shutil.rmtree(partial, ignore_errors=True)  # it may be what fills the disk
+        raise RunFailed(
+            f"{out}: the run failed writing its results ({error}); nothing of it was kept"
+        ) from error
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
     return summary
 
 
@@ -229,7 +256,9 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
     """Execute ``config`` into ``out``, which appears only once the run is complete.
 
     A complete run already in ``out`` with the same configuration is kept and its summary
-    returned; a leftover partial run is discarded and redone (runs are deterministic).
+    returned; one whose files are damaged is redone, as is a leftover partial run (runs are
+    deterministic). A lock next to ``out`` (``.<name>.lock``) keeps a second process from
+    writing the same run.
 
     Args:
         config: The run.
@@ -237,22 +266,50 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
         console: Where a progress bar is shown; none if None.
 
     Raises:
-        ConfigError: ``out`` holds something else, or a run of another configuration.
+        ConfigError: ``out`` holds something else, or a run of another configuration, or
+            another process is writing it.
+        RunFailed: The run could not write its results; nothing of it is left.
     """
-    if out.exists():
-        if is_complete(out):
-            stored = json.loads((out / "config.json").read_text())["run"]
-            if RunConfig.model_validate(stored) != config:
-                raise ConfigError(f"{out}: holds a finished run of another configuration")
-            summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
-            if console is not None:
-                console.print(f"{out}: already complete")
-            return summary
-        raise ConfigError(f"{out}: exists and is not a finished run; choose another --out")
     out.parent.mkdir(parents=True, exist_ok=True)
-    if console is None:
-        return execute_run_atomically(config, out)
-    return _with_progress(config, out, console)
+    with exclusive_lock(out.parent / f".{out.name}.lock", out, "run"):
+        if out.exists():
+            summary = _finished_run(config, out, console)
+            if summary is not None:
+                return summary
+        if console is None:
+            return execute_run_atomically(config, out)
+        return _with_progress(config, out, console)
+
+
+def _finished_run(config: RunConfig, out: Path, console: Console | None) -> dict[str, Any] | None:
+    """The summary of the run of ``config`` complete in ``out``; None, having removed it, if
+    it is damaged.
+
+    Raises:
+        ConfigError: ``out`` holds something else, a run of another configuration, or a damaged
+            run whose configuration cannot be read.
+    """
+    if not is_finished(out):
+        raise ConfigError(f"{out}: exists and is not a finished run; choose another --out")
+    damage = find_damage(out)
+    try:
+        stored = json.loads((out / "config.json").read_text())["run"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise ConfigError(
+            f"{out}: holds a damaged run ({damage or 'config.json cannot be read'}); "
+            "delete it or choose another --out"
+        ) from None
+    if RunConfig.model_validate(stored) != config:
+        raise ConfigError(f"{out}: holds a finished run of another configuration")
+    if damage is not None:
+        if console is not None:
+            console.print(f"{out}: damaged ({damage}); running it again")
+        shutil.rmtree(out)
+        return None
+    if console is not None:
+        console.print(f"{out}: already complete")
+    summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
+    return summary
 
 
 def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, Any]:

@@ -9,12 +9,14 @@ Layout of a run directory::
     loitering.parquet    one row per episode flagged as loitering (reward hacking), with its actions
     trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by episode
     tester/              what the tester learned (the PPO model)
-    summary.json         written last: its presence marks the run complete
+    summary.json         written last: its presence marks the run finished; it holds the
+                         SHA-256 of every other file, so that a damaged run is told apart
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import tempfile
@@ -22,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import pyarrow.parquet as pq
 
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
@@ -73,6 +76,68 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def file_checksums(directory: Path) -> dict[str, str]:
+    """The SHA-256 of every file in a run directory but ``summary.json``, by path relative to
+    the directory (what ``summary.json`` records as ``checksums``)."""
+    return {
+        path.relative_to(directory).as_posix(): _sha256(path)
+        for path in sorted(directory.rglob("*"))
+        if path.is_file() and path != directory / "summary.json"
+    }
+
+
+def find_damage(directory: Path) -> str | None:
+    """What is wrong with the files of a finished run directory; None if they are as written.
+
+    A run whose ``summary.json`` records checksums must match them; a run recorded before
+    checksums were must have tables that read back.
+    """
+    try:
+        summary = json.loads((directory / "summary.json").read_bytes())
+    except (OSError, ValueError) as error:
+        return f"summary.json cannot be read ({error})"
+    if not isinstance(summary, dict):
+        return "summary.json is not a JSON object"
+    recorded = summary.get("checksums")
+    if recorded is None:
+        return _unreadable_file(directory)
+    if not isinstance(recorded, dict):
+        return "summary.json: checksums is not a table of files"
+    for name, digest in recorded.items():
+        path = directory / name
+        if not path.is_file():
+            return f"{name} is missing"
+        if _sha256(path) != digest:
+            return f"{name} does not match its checksum (changed or truncated)"
+    return None
+
+
+def _unreadable_file(directory: Path) -> str | None:
+    """The first file of a run (recorded without checksums) that does not read back."""
+    try:
+        json.loads((directory / "config.json").read_bytes())
+    except (OSError, ValueError) as error:
+        return f"config.json cannot be read ({error})"
+    tables = [directory / f"{name}.parquet" for name in ("episodes", "failures", "loitering")]
+    tables += sorted((directory / "trajectories").glob("*.parquet"))
+    for path in tables:
+        if not path.exists() and path.name != "episodes.parquet":
+            continue  # a run recorded before the table existed
+        try:
+            pq.read_table(path)
+        except (OSError, ValueError) as error:  # pyarrow's ArrowInvalid is a ValueError
+            return f"{path.relative_to(directory)} cannot be read ({error})"
+    return None
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 class RunStore:
