@@ -116,6 +116,13 @@ ControllerOption = Annotated[
 ControllerParamOption = Annotated[
     list[str] | None, typer.Option(help="A controller parameter as KEY=VALUE; repeatable.")
 ]
+ControllerTimeoutOption = Annotated[
+    float | None,
+    typer.Option(
+        help="Wall-clock limit on each call of the controller, in s; a call that exceeds it ends "
+        "the episode as sut_error (default: no limit)."
+    ),
+]
 SafetyLayerOption = Annotated[
     str | None,
     typer.Option(
@@ -175,6 +182,7 @@ def run_command(
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
+    controller_timeout: ControllerTimeoutOption = None,
     tester_param: Annotated[
         list[str] | None,
         typer.Option(
@@ -205,7 +213,11 @@ def run_command(
             tester=tester,
             seed=seed,
             episodes=episodes,
-            env=EnvOptions(decision_period=decision_period, solver=solver),
+            env=EnvOptions(
+                decision_period=decision_period,
+                solver=solver,
+                controller_timeout=controller_timeout,
+            ),
             tester_params={} if tester_plugin else _assignments("--tester-param", tester_param),
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),

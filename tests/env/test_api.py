@@ -33,7 +33,7 @@ def test_make_with_the_documented_keywords():
     [
         ({"field": "3m"}, "unknown field '3m': use one of none, 1.25m, 2m"),
         ({"reward": "sum"}, "reward must be one of"),
-        ({"decision_period": 0.3}, "decision_period .* multiple of the controller period"),
+        ({"decision_period": 0.3}, "decision_period .* multiple of the controller's"),
         ({"scenario": "roundabout"}, "no such scenario file"),
         ({"solver": "snopt"}, "solver must be 'fatrop' or 'ipopt'"),
     ],

@@ -57,6 +57,9 @@ class EnvOptions(_Strict):
     """Simulated time after which an episode times out, in s."""
     stall_duration: float = Field(default=10.0, gt=0)
     """Continuous emergency-stop time after which an episode stalls, in s."""
+    controller_timeout: float | None = Field(default=None, gt=0, allow_inf_nan=False)
+    """Wall-clock limit on each call of the controller, in s: a call that exceeds it ends the
+    episode as ``sut_error``. None: no limit (a limit makes results depend on the machine)."""
     robot: RobotParams = RobotParams()
     """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
     controller receives them in ``reset``."""

@@ -29,6 +29,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    TaskID,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -46,7 +47,7 @@ from hazardhunt.campaign.plugins import (
 )
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
-from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.sut.safety_layer import FieldShape
@@ -57,7 +58,7 @@ from hazardhunt.world.scenario import Scenario
 
 @dataclass(frozen=True)
 class RunProgress:
-    """Where a run stands, after each episode."""
+    """Where a run stands, when its episodes start and after each of them."""
 
     episodes_done: int
     episodes: int
@@ -79,17 +80,23 @@ def build_simulation(
 
     Raises:
         PluginError: A plug-in does not load.
+        ConfigError: The periods do not fit (a decision period that is not a multiple of the
+            controller's, a controller period that is not a multiple of the physics step).
     """
-    return Simulation.build(
-        scenario,
-        field,
-        options.decision_period,
-        solver=options.solver,
-        controller=None if controller is None else make_controller(controller),
-        safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
-        termination=TerminationParams(options.episode_duration, options.stall_duration),
-        robot=options.robot,
-    )
+    try:
+        return Simulation.build(
+            scenario,
+            field,
+            options.decision_period,
+            solver=options.solver,
+            controller=None if controller is None else make_controller(controller),
+            safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
+            termination=TerminationParams(options.episode_duration, options.stall_duration),
+            controller_timeout=options.controller_timeout,
+            robot=options.robot,
+        )
+    except PeriodError as error:
+        raise ConfigError(str(error)) from None
 
 
 def simulation_of(config: RunConfig) -> Simulation:
@@ -115,14 +122,16 @@ def record_run(
 ) -> dict[str, Any]:
     """Run ``config`` and write its results into ``directory`` (created; must not exist).
 
+    ``progress`` hears when the episodes start and after each of them.
+
     Returns:
         The run's summary, also written as ``summary.json`` (the last file written), with the
         checksums of the other files.
     """
+    simulation = simulation_of(config)  # settings that cannot work stop the run here
+    tester = make_run_tester(config)
     directory.mkdir(parents=True)
     started_at = datetime.now(timezone.utc).isoformat()
-    tester = make_run_tester(config)
-    simulation = simulation_of(config)
     classifier = make_classifier(config.classifier, simulation.robot_params)
     write_json_atomic(
         directory / "config.json",
@@ -159,6 +168,8 @@ def record_run(
         on_episode,
         simulation_factory=functools.partial(simulation_of, config),
     )
+    if progress is not None:
+        progress(RunProgress(0, config.episodes, 0, 0.0))
     try:
         tester.explore(recorder, config.episodes)
     finally:
@@ -321,11 +332,18 @@ def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, 
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, console=console, transient=False) as progress:
-        task = progress.add_task("run", total=config.episodes, rate=0.0, failures=0)
+    progress = Progress(*columns, console=console, transient=False)
+    task: TaskID | None = None
 
-        def update(state: RunProgress) -> None:
-            rate = state.episodes_done / state.elapsed_s if state.elapsed_s > 0 else 0.0
-            progress.update(task, completed=state.episodes_done, rate=rate, failures=state.failures)
+    def update(state: RunProgress) -> None:
+        nonlocal task
+        if task is None:  # the run has started: the bar stays off an error in its settings
+            progress.start()
+            task = progress.add_task("run", total=config.episodes, rate=0.0, failures=0)
+        rate = state.episodes_done / state.elapsed_s if state.elapsed_s > 0 else 0.0
+        progress.update(task, completed=state.episodes_done, rate=rate, failures=state.failures)
 
+    try:
         return execute_run_atomically(config, out, update)
+    finally:
+        progress.stop()

@@ -216,7 +216,7 @@ def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[st
         "environment": {
             "field": str(row["field"]),
             "seed": int(row["seed"]),
-            **config.env.model_dump(),
+            **config.env.model_dump(exclude_none=True),
         },
         "expected": {
             "outcome": str(row["outcome"]),

@@ -74,6 +74,7 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         physics_step: float = 0.05,
         termination: TerminationParams = TerminationParams(),
         max_failed_commands: int = 5,
+        controller_timeout: float | None = None,
         robot: RobotParams = RobotParams(),
         human: HumanParams = HumanParams(),
         risk_params: RiskParams = RiskParams(),
@@ -97,6 +98,8 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             termination: Episode duration and stall limit.
             max_failed_commands: Consecutive failed controller commands that end the episode
                 as ``sut_error``.
+            controller_timeout: Wall-clock limit on each call of the controller, in s; a call
+                that exceeds it ends the episode as ``sut_error``. None: no limit.
             robot: Robot parameters.
             human: Human parameters.
             risk_params: Constants of the risk metric.
@@ -113,6 +116,7 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             physics_step=physics_step,
             termination=termination,
             max_failed_commands=max_failed_commands,
+            controller_timeout=controller_timeout,
             robot=robot,
             human=human,
             risk_params=risk_params,

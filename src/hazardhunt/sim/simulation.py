@@ -26,7 +26,15 @@ from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySam
 from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
 from hazardhunt.spec.risk import RiskParams, risk
 from hazardhunt.spec.safety import ContactVerdict, SafetySpecParams, judge_contact
-from hazardhunt.sut.protocols import ControlCommand, Controller, SafetyLayer
+from hazardhunt.sut.guard import (
+    TimeLimit,
+    TimeLimitError,
+    UnusableReturnError,
+    checked_command,
+    checked_status,
+    is_finite_number,
+)
+from hazardhunt.sut.protocols import ControlCommand, Controller, SafetyLayer, SafetyStatus
 from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
 from hazardhunt.sut.safety_layer import FieldShape, LaserSafetyLayer, field_shape
 from hazardhunt.sut.tracking import HumanTracker
@@ -118,6 +126,7 @@ class Simulation:
         physics_step: float = 0.05,
         termination: TerminationParams = TerminationParams(),
         max_failed_commands: int = 5,
+        controller_timeout: float | None = None,
         robot: RobotParams = RobotParams(),
         human: HumanParams = HumanParams(),
         risk_params: RiskParams = RiskParams(),
@@ -131,11 +140,14 @@ class Simulation:
             controller: The robot's controller.
             safety_layer: The safety layer.
             decision_period: Time the human holds each action, in s; a multiple of the
-                controller's period.
+                controller's period, at most the episode's duration.
             physics_step: Physics time step, in s.
             termination: Episode duration and stall limit.
             max_failed_commands: Consecutive failed controller commands that end the episode
                 as ``sut_error``.
+            controller_timeout: Wall-clock limit on each call of the controller, in s (see
+                :class:`~hazardhunt.sut.guard.TimeLimit`); a call that exceeds it ends the
+                episode as ``sut_error``. None: no limit.
             robot: Robot parameters (the controller receives them in ``reset``).
             human: Human parameters.
             risk_params: Constants of the risk metric.
@@ -143,7 +155,8 @@ class Simulation:
 
         Raises:
             ScenarioError: No route leads through the scenario's waypoints to its goal.
-            ValueError: The periods do not fit into each other.
+            PeriodError: The periods do not fit into each other or into the episode.
+            ValueError: ``controller_timeout`` is not a positive number of seconds.
         """
         self.scenario, self.field = scenario, field
         self.controller, self.safety_layer = controller, safety_layer
@@ -151,6 +164,11 @@ class Simulation:
         self.risk_params, self.safety_spec = risk_params, safety_spec
         self.termination, self.max_failed_commands = termination, max_failed_commands
         self.physics_step, self.decision_period = physics_step, decision_period
+        self._control_every, controls_per_decision = check_periods(
+            physics_step, controller.control_period, decision_period, termination.episode_duration
+        )
+        self._physics_per_decision = self._control_every * controls_per_decision
+        self._time_limit = TimeLimit(controller_timeout)
         try:
             self.route: Route = plan_route(
                 scenario.floor,
@@ -162,12 +180,6 @@ class Simulation:
         except RoutePlanningError as error:
             raise ScenarioError(f"{scenario.source}: robot: {error}") from error
         self.tracker = HumanTracker(scenario.floor)
-        self._control_every = _whole_multiple(
-            controller.control_period, physics_step, "controller period", "physics step"
-        )
-        self._physics_per_decision = self._control_every * _whole_multiple(
-            decision_period, controller.control_period, "decision_period", "controller period"
-        )
         self._max_steps = round(termination.episode_duration / physics_step)
         self._started = False
 
@@ -200,7 +212,8 @@ class Simulation:
 
         Raises:
             ScenarioError: The scenario does not load.
-            ValueError: An unknown field setting or solver, or periods that do not fit.
+            PeriodError: Periods that do not fit.
+            ValueError: An unknown field setting or solver.
         """
         loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         shape = field_shape(loaded, field)
@@ -251,10 +264,35 @@ class Simulation:
         self._risks: list[float] = []
         self._samples: list[tuple[Any, ...]] = []
         self._started_at = time.perf_counter()
-        self.safety_layer.reset()
         self.tracker.reset()
-        self.controller.reset(self.scenario.floor, self.route, self.robot, self.robot_params)
+        self._reset_sut()
         self._started = True
+
+    def _reset_sut(self) -> None:
+        """Reset the safety layer and the controller. One that raises (or outlasts the time
+        limit) is not called again: the episode ends after its first physics step as
+        ``sut_error``."""
+        counts = self._counts
+        try:
+            self.safety_layer.reset()
+        except Exception as error:
+            counts.safety_layer_errors.append(f"reset() raised {_named(error)}")
+            self._sut_error = True
+        try:
+            self._time_limit.call(
+                "reset()",
+                self.controller.reset,
+                self.scenario.floor,
+                self.route,
+                self.robot,
+                self.robot_params,
+            )
+        except Exception as error:
+            counts.controller_errors.append(f"reset() raised {_named(error)}")
+            self._command = ControlCommand(
+                speed=0.0, yaw_rate=0.0, failed=True, status=f"reset {_status(error)}"
+            )
+            self._sut_error = True
 
     def decide(self, action: Action) -> DecisionReport:
         """Hold the human's normalised ``action`` for one decision period (or until the
@@ -344,9 +382,10 @@ class Simulation:
         """One physics step; the outcome if it ends the episode."""
         dt = self.physics_step
         now = self._steps * dt
-        if self._steps % self._control_every == 0:
-            self._control(now)
-        self._safety(now)
+        if not self._sut_error:  # else a reset failed: the SUT is not called again
+            if self._steps % self._control_every == 0:
+                self._control(now)
+            self._safety(now)
         self.robot = step_robot(
             self.robot,
             self._command.speed,
@@ -370,10 +409,18 @@ class Simulation:
         return self._judge()
 
     def _safety(self, now: float) -> None:
-        """The safety layer's verdict on the current state."""
-        status = self.safety_layer.update(
-            now, self.robot, self.human_position, self.human_params.radius
-        )
+        """The safety layer's verdict on the current state; when it raises or returns something
+        else than a SafetyStatus, the episode ends as ``sut_error`` with the state unchanged."""
+        try:
+            status = checked_status(
+                self.safety_layer.update(
+                    now, self.robot, self.human_position, self.human_params.radius
+                )
+            )
+        except Exception as error:
+            self._counts.safety_layer_errors.append(_named(error))
+            self._sut_error = True
+            status = SafetyStatus(self.emergency_stop, self.human_in_field)
         if status.emergency_stop and not self.emergency_stop:
             self._counts.emergency_stops += 1
         if self.emergency_stop and not status.emergency_stop:
@@ -439,21 +486,21 @@ class Simulation:
         self._record_sample()
 
     def _checked_command(self, now: float, tracked: Any) -> ControlCommand:
-        """The controller's command, or a brake when it fails, raises or is not finite."""
+        """The controller's command, or a brake when it fails; one that raises, outlasts the
+        time limit or returns something unusable (a non-finite command, not a ControlCommand)
+        also ends the episode as ``sut_error``."""
         counts = self._counts
         counts.controller_calls += 1
         try:
-            command = self.controller.control(now, self.robot, tracked)
+            command = checked_command(
+                self._time_limit.call(
+                    "control()", self.controller.control, now, self.robot, tracked
+                )
+            )
         except Exception as error:
-            command = ControlCommand(
-                speed=0.0, yaw_rate=0.0, failed=True, status=f"raised {type(error).__name__}"
-            )
-            counts.controller_errors.append(f"{type(error).__name__}: {error}")
+            command = ControlCommand(speed=0.0, yaw_rate=0.0, failed=True, status=_status(error))
+            counts.controller_errors.append(_named(error))
             self._sut_error = True
-        if not (math.isfinite(command.speed) and math.isfinite(command.yaw_rate)):
-            command = ControlCommand(
-                speed=0.0, yaw_rate=0.0, failed=True, status="non-finite command"
-            )
         counts.solve_times.append(command.solve_time_s)
         if not command.failed:
             self._failed_in_a_row = 0
@@ -528,6 +575,7 @@ class Simulation:
             controller_calls=counts.controller_calls,
             controller_failures=counts.controller_failures,
             controller_errors=tuple(counts.controller_errors),
+            safety_layer_errors=tuple(counts.safety_layer_errors),
         )
 
     def timing(self) -> EpisodeTiming:
@@ -581,6 +629,7 @@ class _EpisodeCounts:
     controller_calls: int = 0
     controller_failures: int = 0
     controller_errors: list[str] = field(default_factory=list)
+    safety_layer_errors: list[str] = field(default_factory=list)
     solve_times: list[float] = field(default_factory=list)
 
     def add(self, step_risk: float, face: str | None, verdict: ContactVerdict) -> None:
@@ -596,10 +645,69 @@ class _EpisodeCounts:
         self.closest_emergency_stop = stop
 
 
+class PeriodError(ValueError):
+    """Time settings of a simulation that cannot work together; the message names the setting,
+    its value and what it must be."""
+
+
+def check_periods(
+    physics_step: float, control_period: float, decision_period: float, episode_duration: float
+) -> tuple[int, int]:
+    """Physics steps per control period and control periods per decision.
+
+    Args:
+        physics_step: Physics time step, in s.
+        control_period: The controller's period, in s: a multiple of the physics step.
+        decision_period: Time the human holds each action, in s: a multiple of the control
+            period, at most the episode's duration.
+        episode_duration: Simulated time after which an episode times out, in s.
+
+    Raises:
+        PeriodError: One line naming the setting at fault.
+    """
+    for name, value in (
+        ("physics_step", physics_step),
+        ("the controller's control_period", control_period),
+        ("decision_period", decision_period),
+        ("episode_duration", episode_duration),
+    ):
+        if not (is_finite_number(value) and value > 0):
+            raise PeriodError(f"{name} must be a positive, finite number of seconds, not {value!r}")
+    if decision_period > episode_duration:
+        raise PeriodError(
+            f"decision_period ({decision_period:g} s) must be at most the episode's duration "
+            f"({episode_duration:g} s)"
+        )
+    return (
+        _whole_multiple(
+            control_period, physics_step, "the controller's control_period", "the physics step"
+        ),
+        _whole_multiple(
+            decision_period, control_period, "decision_period", "the controller's control_period"
+        ),
+    )
+
+
 def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int:
     count = round(value / unit)
-    if count < 1 or abs(count * unit - value) > 1e-9:
-        raise ValueError(
-            f"{name} ({value:g} s) must be a positive multiple of the {unit_name} ({unit:g} s)"
-        )
-    return count
+    if count >= 1 and abs(count * unit - value) <= 1e-9:
+        return count
+    below, above = max(math.floor(value / unit), 1) * unit, math.ceil(value / unit) * unit
+    nearest = f"{below:g} s" if below >= above else f"{below:g} s or {above:g} s"
+    raise PeriodError(
+        f"{name} ({value:g} s) must be a multiple of {unit_name} ({unit:g} s), e.g. {nearest}"
+    )
+
+
+def _named(error: BaseException) -> str:
+    """An error as recorded: ``Type: message``."""
+    return f"{type(error).__name__}: {error}"
+
+
+def _status(error: BaseException) -> str:
+    """The controller status of a brake that replaced a call that went wrong."""
+    if isinstance(error, UnusableReturnError):
+        return "unusable return"
+    if isinstance(error, TimeLimitError):
+        return "time limit exceeded"
+    return f"raised {type(error).__name__}"

@@ -59,22 +59,33 @@ class EpisodeSummary:
     controller_failures: int = 0
     """Commands the controller could not compute (failed, non-finite, or raised)."""
     controller_errors: tuple[str, ...] = ()
-    """``Type: message`` of every exception the controller raised."""
+    """What went wrong with the controller, ``Type: message``: every exception ``control``
+    raised, an unusable return (``UnusableReturnError: ...``), a call over the time limit
+    (``TimeLimitError: ...``); ``reset() raised Type: message`` for its ``reset``."""
+    safety_layer_errors: tuple[str, ...] = ()
+    """The same for the safety layer: ``update``'s exceptions and unusable returns, and
+    ``reset() raised Type: message``."""
 
     def as_row(self) -> dict[str, Any]:
         """The summary as one table row (the errors joined by ``; ``)."""
         row = dataclasses.asdict(self)
-        row["controller_errors"] = "; ".join(self.controller_errors)
+        for key in _ERROR_LISTS:
+            row[key] = "; ".join(getattr(self, key))
         return row
 
     @classmethod
     def from_row(cls, row: Mapping[str, Any]) -> EpisodeSummary:
         """A summary from a table row written by :meth:`as_row` (other keys are ignored)."""
         values = _known_fields(cls, row)
-        errors = values.get("controller_errors")
-        if isinstance(errors, str):
-            values["controller_errors"] = tuple(errors.split("; ")) if errors else ()
+        for key in _ERROR_LISTS:
+            errors = values.get(key)
+            if isinstance(errors, str):
+                values[key] = tuple(errors.split("; ")) if errors else ()
         return cls(**values)
+
+
+_ERROR_LISTS = ("controller_errors", "safety_layer_errors")
+"""The summary's lists of errors, one string each in a table."""
 
 
 @dataclass(frozen=True)

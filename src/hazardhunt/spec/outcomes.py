@@ -22,7 +22,8 @@ class Outcome(str, Enum):
     STALL = "stall"
     """The emergency stop held for too long in a row."""
     SUT_ERROR = "sut_error"
-    """The system under test failed (a controller that raised or could not command)."""
+    """The system under test failed: a controller that could not command, or a controller or
+    safety layer that raised, returned something unusable or outlasted its time limit."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,226 @@
+"""Calling the system under test's plug-ins without trusting them.
+
+A controller or safety layer is someone's code: it may raise, return something its protocol does
+not allow, or hang. The simulation calls them through these helpers, which turn the last two into
+exceptions too, so that each of the three ends the episode as ``sut_error`` with the error
+recorded, and the run goes on:
+
+- :func:`checked_command` and :func:`checked_status` check what ``control`` and ``update``
+  return (an :class:`UnusableReturnError` saying what is wrong);
+- :class:`TimeLimit` bounds the wall-clock time of a call (a :class:`TimeLimitError`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+import reprlib
+import signal
+import threading
+import time
+import warnings
+from collections.abc import Callable
+from types import FrameType
+from typing import Any, TypeVar
+
+import numpy as np
+
+from hazardhunt.sut.protocols import ControlCommand, SafetyStatus
+
+T = TypeVar("T")
+
+
+class UnusableReturnError(ValueError):
+    """A plug-in returned something its protocol does not allow."""
+
+
+class TimeLimitError(Exception):
+    """A plug-in's call ran longer than its time limit."""
+
+
+class _Alarm(BaseException):
+    """Raised inside the call when its time is up; not an Exception, so that a plug-in's own
+    ``except Exception`` does not swallow it."""
+
+
+def checked_command(returned: object) -> ControlCommand:
+    """``returned`` as a command the simulation can play and record.
+
+    Speed and turn rate are finite numbers (unless the command is ``failed``, which brakes and
+    ignores them), the status a string, the solve time a finite number of seconds, and the
+    planned and predicted positions None or (k, 2) arrays.
+
+    Raises:
+        UnusableReturnError: Saying what is wrong.
+    """
+    if not isinstance(returned, ControlCommand):
+        raise UnusableReturnError(
+            f"control() returned {_described(returned)}, not a ControlCommand"
+        )
+    for name in ("speed", "yaw_rate", "solve_time_s"):
+        value = getattr(returned, name)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise UnusableReturnError(
+                f"control() returned a command whose {name} is {_described(value)}"
+            )
+    if not isinstance(returned.failed, (bool, np.bool_)):
+        raise UnusableReturnError(
+            f"control() returned a command whose failed is {_described(returned.failed)}"
+        )
+    if not isinstance(returned.status, str):
+        raise UnusableReturnError(
+            f"control() returned a command whose status is {_described(returned.status)}"
+        )
+    if not returned.failed and not (
+        math.isfinite(returned.speed) and math.isfinite(returned.yaw_rate)
+    ):
+        raise UnusableReturnError(
+            f"control() returned a non-finite command (speed {returned.speed}, "
+            f"yaw_rate {returned.yaw_rate})"
+        )
+    if not (math.isfinite(returned.solve_time_s) and returned.solve_time_s >= 0):
+        raise UnusableReturnError(f"control() returned a solve_time_s of {returned.solve_time_s}")
+    return dataclasses.replace(
+        returned,
+        speed=float(returned.speed),
+        yaw_rate=float(returned.yaw_rate),
+        failed=bool(returned.failed),
+        solve_time_s=float(returned.solve_time_s),
+        planned_positions=_points("planned_positions", returned.planned_positions),
+        predicted_human=_points("predicted_human", returned.predicted_human),
+    )
+
+
+def checked_status(returned: object) -> SafetyStatus:
+    """``returned`` as the safety layer's verdict: a SafetyStatus of two bools.
+
+    Raises:
+        UnusableReturnError: Saying what is wrong.
+    """
+    if not isinstance(returned, SafetyStatus):
+        raise UnusableReturnError(f"update() returned {_described(returned)}, not a SafetyStatus")
+    flags = (returned.emergency_stop, returned.human_in_field)
+    if not all(isinstance(flag, (bool, np.bool_)) for flag in flags):
+        raise UnusableReturnError(
+            f"update() returned a SafetyStatus of {_described(flags[0])} and "
+            f"{_described(flags[1])}, not two bools"
+        )
+    return SafetyStatus(bool(flags[0]), bool(flags[1]))
+
+
+def is_finite_number(value: object) -> bool:
+    """Whether ``value`` is a finite real number (a bool is not)."""
+    return not isinstance(value, bool) and isinstance(value, numbers.Real) and math.isfinite(value)
+
+
+def _points(name: str, value: Any) -> Any:
+    """None, or ``value`` as an array of (x, y) rows."""
+    if value is None:
+        return None
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.ndim != 2 or array.shape[1] != 2:
+        raise UnusableReturnError(
+            f"control() returned a command whose {name} is {_described(value)}, not None or "
+            "an array of (x, y) rows"
+        )
+    return array
+
+
+def _described(value: object) -> str:
+    """``value`` in a message: its type and a short repr."""
+    if value is None:
+        return "None"
+    return f"a {type(value).__name__} ({reprlib.repr(value)})"
+
+
+class TimeLimit:
+    """A wall-clock limit on each call of a plug-in, in s; None for no limit.
+
+    It arms a SIGALRM timer (``signal.setitimer``), which only the main thread of a process
+    receives: hazardhunt plays its episodes there, in the worker processes of a batch too. In
+    another thread, or on a platform without SIGALRM, calls run without a limit and a warning
+    says so. A call stuck inside native code (a solver written in C) is interrupted once it
+    returns to Python.
+    """
+
+    def __init__(self, seconds: float | None) -> None:
+        """Raises ValueError unless ``seconds`` is None or a positive, finite number."""
+        if seconds is not None and not (is_finite_number(seconds) and seconds > 0):
+            raise ValueError(
+                f"controller_timeout must be a positive number of seconds or None, not {seconds!r}"
+            )
+        self.seconds = seconds
+        self._warned = False
+
+    def call(self, what: str, function: Callable[..., T], *args: Any) -> T:
+        """``function(*args)``, interrupted when it outlasts the limit.
+
+        Args:
+            what: The call, for the message (``"control()"``).
+
+        Raises:
+            TimeLimitError: The call took longer than the limit (also when the function
+                caught the interruption and returned).
+        """
+        if self.seconds is None or not self._can_interrupt():
+            return function(*args)
+        try:
+            return _interruptible(self.seconds, function, args)
+        except _Alarm:
+            raise TimeLimitError(
+                f"{what} took longer than its time limit of {self.seconds:g} s"
+            ) from None
+
+    def _can_interrupt(self) -> bool:
+        if hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread():
+            return True
+        if not self._warned:
+            warnings.warn(
+                "controller_timeout works only in a process's main thread on a platform with "
+                "SIGALRM; the controller runs here without a time limit",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            self._warned = True
+        return False
+
+
+def _interruptible(seconds: float, function: Callable[..., T], args: tuple[Any, ...]) -> T:
+    """``function(*args)`` under a SIGALRM timer of ``seconds``; raises _Alarm when it goes off,
+    also when the function caught the interruption and returned or raised something else."""
+    expired = False
+
+    def on_alarm(signum: int, frame: FrameType | None) -> None:
+        nonlocal expired
+        expired = True
+        raise _Alarm
+
+    started = time.monotonic()
+    previous_handler = signal.signal(signal.SIGALRM, on_alarm)
+    previous_timer = (0.0, 0.0)
+    try:
+        try:
+            previous_timer = signal.setitimer(signal.ITIMER_REAL, seconds)
+            result = function(*args)
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+    except Exception:
+        if not expired:
+            raise
+    finally:
+        signal.signal(signal.SIGALRM, previous_handler)
+        _rearm(previous_timer, time.monotonic() - started)
+    if expired:
+        raise _Alarm
+    return result
+
+
+def _rearm(timer: tuple[float, float], elapsed: float) -> None:
+    """Restart a timer someone else had set, less the time the call took."""
+    delay, interval = timer
+    if delay > 0:
+        signal.setitimer(signal.ITIMER_REAL, max(delay - elapsed, 1e-6), interval)
