@@ -25,6 +25,7 @@ from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
 
 if TYPE_CHECKING:
+    from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
 
 app = typer.Typer(
@@ -202,7 +203,6 @@ def run_command(
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
     from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
-    from hazardhunt.campaign.run import RunFailed, execute_run
 
     tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
@@ -225,6 +225,13 @@ def run_command(
         )
     )
     check_plugins(config)
+    _execute_and_print(config, out, json_output)
+
+
+def _execute_and_print(config: RunConfig, out: Path, json_output: bool) -> None:
+    """Execute a run and print its summary (JSON or a table); a failed run exits with 1."""
+    from hazardhunt.campaign.run import RunFailed, execute_run
+
     try:
         summary = execute_run(config, out, console=err_console)
     except RunFailed as error:
