@@ -241,8 +241,7 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
     """
     if out.exists():
         if is_complete(out):
-            stored = json.loads((out / "config.json").read_text())["run"]
-            if RunConfig.model_validate(stored) != config:
+            if _stored_config(out) != config:
                 raise ConfigError(f"{out}: holds a finished run of another configuration")
             summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
             if console is not None:
@@ -253,6 +252,21 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
     if console is None:
         return execute_run_atomically(config, out)
     return _with_progress(config, out, console)
+
+
+def _stored_config(out: Path) -> RunConfig:
+    """The configuration a finished run in ``out`` recorded.
+
+    Raises:
+        ConfigError: Its ``config.json`` cannot be read or holds no run configuration.
+    """
+    path = out / "config.json"
+    try:
+        return RunConfig.model_validate(json.loads(path.read_text(encoding="utf-8"))["run"])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        # ValueError covers a JSON syntax error, bad UTF-8 and pydantic's ValidationError.
+        problem = error.strerror if isinstance(error, OSError) else "not a run's configuration"
+        raise ConfigError(f"{path}: {problem}; use another --out or delete {out}") from None
 
 
 def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, Any]:
