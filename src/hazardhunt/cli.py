@@ -6,7 +6,7 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -202,7 +202,12 @@ def run_command(
     ] = False,
 ) -> None:
     """Run one tester on one scenario and field setting for a budget of episodes."""
-    from hazardhunt.campaign.config import EnvOptions, RunConfig, check_plugins
+    from hazardhunt.campaign.config import (
+        EnvOptions,
+        RunConfig,
+        check_output_location,
+        check_plugins,
+    )
 
     tester_plugin = _plugin("--tester", tester, tester_param) if is_import_path(tester) else None
     config = _validated(
@@ -225,6 +230,7 @@ def run_command(
         )
     )
     check_plugins(config)
+    check_output_location(out)
     _execute_and_print(config, out, json_output)
 
 
@@ -357,7 +363,7 @@ def campaign(
     Exits with code 1 when some runs raised (after the others finished and the report).
     """
     from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
-    from hazardhunt.campaign.config import load_campaign
+    from hazardhunt.campaign.config import check_output_location, load_campaign
 
     if executor not in EXECUTORS:
         raise typer.BadParameter(f"use {' or '.join(EXECUTORS)}", param_hint="--executor")
@@ -366,6 +372,7 @@ def campaign(
     if address is not None and executor != "ray":
         raise typer.BadParameter("only with --executor ray", param_hint="--address")
     config = load_campaign(file, _plugin("--classifier", classifier, classifier_param))
+    check_output_location(out)
     try:
         run_campaign(
             config, out, workers=workers, executor=executor, address=address, console=console
@@ -548,7 +555,8 @@ def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
 
 
 def run() -> None:
-    """Entry point that turns input errors into one clear line on stderr and exit code 2."""
+    """Entry point: an input error is one clear line on stderr and exit code 2, a file that
+    cannot be written one line and exit code 1, and Ctrl-C says how to resume."""
     from hazardhunt.analysis.results import ResultsError
     from hazardhunt.campaign.replay import ReplayError
     from hazardhunt.cases import CaseError
@@ -557,8 +565,37 @@ def run() -> None:
     try:
         app()
     except (ScenarioError, ConfigError, ReplayError, ResultsError, CaseError, PluginError) as error:
-        err_console.print(f"[red]error:[/red] {escape(str(error))}")
-        raise SystemExit(2) from None
+        _exit_with(str(error), 2)
+    except OSError as error:
+        where = f"{error.filename}: " if error.filename else ""
+        _exit_with(f"{where}{error.strerror or error}", 1)
+    except KeyboardInterrupt:
+        _interrupted()
+    except SystemExit as ended:
+        if ended.code == INTERRUPTED:  # typer's answer to Ctrl-C
+            _interrupted()
+        raise
+
+
+INTERRUPTED = 130
+"""The exit code of a command interrupted with Ctrl-C (128 + SIGINT), as shells use it."""
+
+
+def _exit_with(message: str, code: int) -> NoReturn:
+    err_console.print(f"[red]error:[/red] {escape(message)}")
+    raise SystemExit(code) from None
+
+
+def _interrupted() -> NoReturn:
+    resumable = len(sys.argv) > 1 and sys.argv[1] in ("run", "campaign")
+    how = (
+        ": run the same command again to resume (complete runs are kept, the rest is redone "
+        "from its start)"
+        if resumable
+        else ""
+    )
+    err_console.print(f"[yellow]interrupted[/yellow]{how}")
+    raise SystemExit(INTERRUPTED) from None
 
 
 if __name__ == "__main__":

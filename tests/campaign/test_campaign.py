@@ -16,8 +16,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from hazardhunt.campaign import config as config_module
 from hazardhunt.campaign.config import load_campaign
-from hazardhunt.world.scenario import load_scenario
+from hazardhunt.world.scenario import Scenario, load_scenario
 from tests.helpers import hazardhunt, run_tables
 
 EPISODES = 6
@@ -189,12 +190,74 @@ def test_ray_records_the_same_episodes_as_local(
         ),
         pytest.param(
             GRID + "[tester.ppo-max]\nn_step = 8\n",
-            "tester: tester 'ppo-max': unknown parameter 'n_step'",
+            "tester.ppo-max.n_step: unknown parameter",
             id="tester-parameter",
         ),
         pytest.param(GRID.replace(f"= {EPISODES}", "= 0"), "episodes", id="no-episodes"),
         pytest.param(GRID.replace("[0, 1]", "[]"), "seeds", id="no-seeds"),
         pytest.param(None, "no such campaign file", id="missing-file"),
+        # Settings that passed the first check and failed once the runs had started.
+        pytest.param(
+            GRID + "[env]\ndecision_period = 0.3\n",
+            "env.decision_period: 0.3 s is not a whole multiple of the controller's period",
+            id="decision-period",
+        ),
+        pytest.param(
+            GRID + "[env]\ndecision_period = inf\n",
+            "env.decision_period: Input should be a finite number",
+            id="infinite-decision-period",
+        ),
+        pytest.param(
+            GRID + "[env]\ndecision_period = 1e9\n",
+            "env.decision_period: 1e+09 s is longer than an episode",
+            id="huge-decision-period",
+        ),
+        pytest.param(
+            GRID + "[env]\nepisode_duration = nan\n",
+            "env.episode_duration: Input should be a finite number",
+            id="nan-duration",
+        ),
+        pytest.param(
+            GRID + "[tester.random]\nattemps = 3\n",
+            "tester.random.attemps: unknown parameter; the tester takes attempts",
+            id="random-parameter",
+        ),
+        pytest.param(
+            GRID + "[tester.ppo-max]\nlearning_rate = -1\n",
+            "tester.ppo-max.learning_rate: must be a number in (0, 1], not -1",
+            id="learning-rate",
+        ),
+        pytest.param(
+            GRID + "[tester.ppo-max]\nn_steps = 1\n",
+            "tester.ppo-max.n_steps: n_steps x n_envs (1) must be from 2",
+            id="one-step",
+        ),
+        pytest.param(
+            GRID + "[tester.ppo-acc]\nbatch_size = 0\n",
+            "tester.ppo-acc.batch_size: must be a whole number >= 2, not 0",
+            id="batch-size",
+        ),
+        pytest.param(
+            GRID + "[tester.ppo-max]\ngamma = 5\n",
+            "tester.ppo-max.gamma: must be a number in (0, 1], not 5",
+            id="gamma",
+        ),
+        pytest.param(
+            GRID + "[tester.ppo-max]\nn_envs = 1000\n",
+            "tester.ppo-max.n_envs: must be a whole number from 1 to 64, not 1000",
+            id="n-envs",
+        ),
+        # Values of another type are refused, not coerced.
+        pytest.param(
+            GRID.replace(f"= {EPISODES}", "= true"),
+            "episodes: Input should be a valid integer",
+            id="boolean-episodes",
+        ),
+        pytest.param(
+            GRID.replace("[0, 1]", '["0", "1"]'),
+            "seeds.0: Input should be a valid integer",
+            id="string-seeds",
+        ),
     ],
 )
 def test_bad_input_is_one_line_naming_file_and_field(
@@ -253,22 +316,27 @@ def test_a_scenario_file_that_does_not_load_stops_the_campaign_before_it_starts(
     assert not out.exists()
 
 
+RAISING_TESTER = """\
+class Raising:
+    name = "raising"
+
+    def __init__(self, seed):
+        self.seed = seed
+
+    def explore(self, env, episodes):
+        raise RuntimeError("this tester gives up")
+
+    def save(self, directory):
+        pass
+"""
+
+
 def test_a_run_that_raises_is_recorded_and_the_others_complete(tmp_path: Path) -> None:
-    # The file loads, but its goal lies too close to a shelf for any route: the run raises.
-    builtin = load_scenario("head-on")
-    broken = tmp_path / "broken.toml"
-    broken.write_text(
-        Path(builtin.source)
-        .read_text()
-        .replace(
-            'map = "shopfloor.toml"', f'map = "{Path(builtin.source).parent / "shopfloor.toml"}"'
-        )
-        .replace("goal = { x = 18.0, y = 10.0 }", "goal = { x = 5.0, y = 8.8 }")
-    )
+    (tmp_path / "raising_tester.py").write_text(RAISING_TESTER)
     file = tmp_path / "campaign.toml"
     file.write_text(
-        f'scenarios = ["head-on", "{broken}"]\nfields = ["2m"]\ntesters = ["random"]\n'
-        "seeds = [0]\nepisodes = 3\n"
+        'scenarios = ["head-on"]\nfields = ["2m"]\ntesters = ["random", "raising"]\n'
+        'seeds = [0]\nepisodes = 3\n[tester.raising]\npath = "raising_tester:Raising"\n'
     )
     out = tmp_path / "campaign"
     result = hazardhunt("campaign", file, "--out", out, "--workers", "2")
@@ -278,10 +346,10 @@ def test_a_run_that_raises_is_recorded_and_the_others_complete(tmp_path: Path) -
     statuses = {run["run_id"]: run["status"] for run in summary["runs"]}
     assert statuses == {
         "head-on__2m__random__seed0": "complete",
-        "broken__2m__random__seed0": "failed",
+        "head-on__2m__raising__seed0": "failed",
     }
     [failed] = [run for run in summary["runs"] if run["status"] == "failed"]
-    assert "broken.toml" in failed["error"]
+    assert "this tester gives up" in failed["error"]
     assert "failed" in result.stdout
     assert (out / "runs" / "head-on__2m__random__seed0" / "summary.json").is_file()
 
@@ -318,3 +386,126 @@ def test_scenario_files_are_found_next_to_the_campaign_file(tmp_path: Path) -> N
     config = load_campaign(file)
     assert config.scenarios == [str(mine)]
     assert config.runs()[0].run_id == "mine__2m__random__seed0"
+
+
+def test_a_campaign_file_that_is_a_directory_is_one_line(tmp_path: Path) -> None:
+    file, out = tmp_path / "campaign.toml", tmp_path / "out"
+    file.mkdir()
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 2
+    [line] = result.stderr.strip().splitlines()
+    assert f"{file}: is a directory, not a campaign file" in line
+    assert not out.exists()
+
+
+def test_an_out_under_a_file_is_one_line(campaign_file: Path, tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    result = hazardhunt("campaign", campaign_file, "--out", tmp_path / "notes.txt" / "out")
+    assert result.returncode == 2
+    [line] = result.stderr.strip().splitlines()
+    assert f"--out: {tmp_path / 'notes.txt'} is a file, not a directory" in line
+
+
+def test_an_unreachable_goal_stops_the_campaign_before_it_starts(tmp_path: Path) -> None:
+    builtin = Path(load_scenario("head-on").source)
+    unreachable = tmp_path / "unreachable.toml"
+    unreachable.write_text(
+        builtin.read_text()
+        .replace('map = "shopfloor.toml"', f'map = "{builtin.parent / "shopfloor.toml"}"')
+        .replace("goal = { x = 18.0, y = 10.0 }", "goal = { x = 5.0, y = 8.8 }")
+    )
+    file = tmp_path / "campaign.toml"
+    file.write_text(GRID.replace('"overtaking"', '"unreachable.toml"'))
+    out = tmp_path / "campaign"
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 2
+    [line] = result.stderr.strip().splitlines()
+    assert str(file) in line
+    assert f"scenarios.1: {unreachable}: robot.goal: the robot cannot get there" in line
+    assert not out.exists()
+
+
+def test_a_campaign_file_fixed_after_its_runs_failed_runs_with_the_same_command(
+    tmp_path: Path,
+) -> None:
+    (tmp_path / "raising_tester.py").write_text(RAISING_TESTER)
+    file, out = tmp_path / "campaign.toml", tmp_path / "campaign"
+    file.write_text(
+        'scenarios = ["head-on"]\nfields = ["2m"]\ntesters = ["raising"]\nseeds = [0]\n'
+        'episodes = 3\n[tester.raising]\npath = "raising_tester:Raising"\n'
+    )
+    assert hazardhunt("campaign", file, "--out", out).returncode == 1
+    file.write_text(GRID.replace("seeds = [0, 1]", "seeds = [0]").replace("= 6", "= 3"))
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["runs_complete"], summary["runs_failed"]) == (2, 0)
+    assert json.loads((out / "campaign.json").read_text())["testers"] == ["random"]
+
+
+def scenario_with_fields(path: Path, *fields: str) -> Path:
+    """The built-in overtaking scenario as a file that defines ``fields`` (each the 2 m one)."""
+    builtin = Path(load_scenario("overtaking").source)
+    text = builtin.read_text().replace(
+        'map = "shopfloor.toml"', f'map = "{builtin.parent / "shopfloor.toml"}"'
+    )
+    path.write_text(text + "".join(f'[fields."{f}"]\ndiameter = 2.0\n' for f in fields))
+    return path
+
+
+def test_a_field_named_like_a_path_stays_inside_the_campaign_and_exports(tmp_path: Path) -> None:
+    field = "x/../../../../ESCAPED"
+    home = tmp_path / "a" / "b" / "c"
+    home.mkdir(parents=True)
+    scenario_with_fields(home / "mine.toml", field)
+    file = home / "campaign.toml"
+    file.write_text(
+        f'scenarios = ["mine.toml"]\nfields = ["{field}"]\ntesters = ["random"]\n'
+        f"seeds = [0]\nepisodes = {EPISODES}\n"
+    )
+    out = home / "campaign"
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    [run] = (out / "runs").iterdir()
+    assert run.name == "mine__x_.._.._.._.._ESCAPED__random__seed0"
+    assert [p for p in tmp_path.rglob("*ESCAPED*") if out not in p.parents] == []
+    exported = hazardhunt("export", out, "--out", home / "cases")
+    assert exported.returncode == 0, exported.stderr
+    assert [p.name for p in (home / "cases").iterdir()] == [f"{run.name}__episode5.toml"]
+
+
+def test_names_that_give_one_run_directory_name_the_key_and_the_file(tmp_path: Path) -> None:
+    scenario_with_fields(tmp_path / "mine.toml", "a/b", "a_b")
+    file = tmp_path / "campaign.toml"
+    file.write_text(
+        'scenarios = ["mine.toml"]\nfields = ["a/b", "a_b"]\ntesters = ["random"]\n'
+        "seeds = [0]\nepisodes = 3\n"
+    )
+    out = tmp_path / "campaign"
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 2
+    [line] = result.stderr.strip().splitlines()
+    assert f"{file}: fields: 'a/b' and 'a_b' give the same run directory" in line
+    assert not out.exists()
+
+
+def test_a_campaign_loads_each_scenario_file_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    loads: list[str] = []
+
+    def counted(name: str) -> Scenario:
+        loads.append(Path(name).name)
+        return load_scenario(name)
+
+    monkeypatch.setattr(config_module, "load_scenario", counted)
+    for name in ("one.toml", "two.toml"):
+        scenario_with_fields(tmp_path / name, "wide")
+    file = tmp_path / "campaign.toml"
+    file.write_text(
+        'scenarios = ["one.toml", "two.toml"]\nfields = ["2m", "wide"]\n'
+        'testers = ["random", "cem"]\nseeds = [0, 1, 2]\nepisodes = 3\n'
+    )
+    runs = load_campaign(file).runs()
+    assert len(runs) == 24
+    assert sorted(loads) == ["one.toml", "two.toml"]

@@ -14,7 +14,7 @@ from hazardhunt.campaign.config import CampaignConfig, RunConfig
 from hazardhunt.campaign.plugins import UntrustedPluginError
 from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
-from hazardhunt.campaign.store import read_trajectory
+from hazardhunt.campaign.store import file_checksums, read_trajectory
 from hazardhunt.cases import export_cases, regress_case
 from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
@@ -79,6 +79,9 @@ def received_copy(run_directory, folder, **plugins):
     config = json.loads((copy / "config.json").read_text())
     config["run"].update(plugins)
     (copy / "config.json").write_text(json.dumps(config))
+    summary = json.loads((copy / "summary.json").read_text())  # a sender's checksums match
+    summary["checksums"] = file_checksums(copy)
+    (copy / "summary.json").write_text(json.dumps(summary))
     return copy
 
 

@@ -1,11 +1,17 @@
 """The `hazardhunt run` command: smoke run, JSON summary, bad input."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
+from hazardhunt.world.scenario import load_scenario
 from tests.helpers import hazardhunt
 
 SUMMARY_KEYS = {
@@ -62,7 +68,32 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
         ({"tester-param": "n_envs"}, "'n_envs' is not KEY=VALUE"),
         (
             {"tester": "ppo-max", "tester-param": "n_env=2"},
-            "tester_params: tester 'ppo-max': unknown parameter 'n_env'",
+            "tester_params.n_env: unknown parameter",
+        ),
+        # Settings that passed the first check and failed once the run had started.
+        ({"decision-period": 0.07}, "env.decision_period: 0.07 s is not a whole multiple"),
+        ({"decision-period": 0.3}, "env.decision_period: 0.3 s is not a whole multiple"),
+        ({"decision-period": "inf"}, "decision_period: Input should be a finite number"),
+        ({"decision-period": "1e9"}, "decision_period: 1e+09 s is longer than an episode"),
+        ({"tester-param": "attemps=3"}, "tester_params.attemps: unknown parameter"),
+        ({"tester-param": "attempts=many"}, "tester_params.attempts: must be a whole number"),
+        (
+            {"tester": "ppo-max", "tester-param": "learning_rate=-1"},
+            "tester_params.learning_rate: must be a number in (0, 1], not -1",
+        ),
+        ({"tester": "ppo-max", "tester-param": "n_steps=0"}, "tester_params.n_steps: must be"),
+        ({"tester": "ppo-max", "tester-param": "n_steps=1"}, "tester_params.n_steps: n_steps x"),
+        (
+            {"tester": "ppo-max", "tester-param": "batch_size=0"},
+            "tester_params.batch_size: must be a whole number >= 2, not 0",
+        ),
+        (
+            {"tester": "ppo-max", "tester-param": "gamma=5"},
+            "tester_params.gamma: must be a number in (0, 1], not 5",
+        ),
+        (
+            {"tester": "ppo-max", "tester-param": "n_envs=1000"},
+            "tester_params.n_envs: must be a whole number from 1 to 64, not 1000",
         ),
     ],
 )
@@ -105,3 +136,106 @@ def test_the_scenarios_command_names_the_fields_there_are(tmp_path):
     done = hazardhunt("scenarios", "crossing", "--field", "wide", "--out", tmp_path)
     assert done.returncode == 2
     assert "unknown field 'wide': use one of none, 1.25m, 2m" in done.stderr
+
+
+SHOPFLOOR = Path(load_scenario("head-on").source).parent / "shopfloor.toml"
+
+SCENARIO = f"""\
+name = "mine"
+map = "{SHOPFLOOR}"
+[robot]
+start = {{ x = 2.0, y = 10.0, heading_deg = 0.0 }}
+goal = {{ x = 18.0, y = 10.0 }}
+[human]
+start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
+"""
+
+
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        pytest.param(
+            ("heading_deg = 90.0", "heading_deg = nan"),
+            "human.start.heading_deg: Input should be a finite number",
+            id="nan-heading",
+        ),
+        pytest.param(
+            ("y = 10.0, heading", "y = inf, heading"),
+            "robot.start.y: Input should be a finite number",
+            id="inf-position",
+        ),
+        pytest.param(
+            ("goal = { x = 18.0, y = 10.0 }", "goal = { x = 5.0, y = 8.8 }"),
+            "robot.goal: the robot cannot get there: route point (5.00, 8.80) lies within",
+            id="unreachable-goal",
+        ),
+        pytest.param(
+            ("[human]", "[fields.wide]\ndiameter = inf\n[human]"),
+            "fields.wide.diameter: diameter must be a positive number of m, not inf",
+            id="inf-field-diameter",
+        ),
+    ],
+)
+def test_a_scenario_value_that_cannot_work_is_one_line_before_anything_is_written(
+    tmp_path, change, key
+):
+    scenario = tmp_path / "files" / "mine.toml"
+    scenario.parent.mkdir()
+    scenario.write_text(SCENARIO.replace(*change))
+    out = tmp_path / "results" / "run"
+    done = hazardhunt("run", *run_args(out, scenario=scenario))
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"{scenario}: {key}" in line
+    assert not (tmp_path / "results").exists()
+
+
+def test_an_out_that_cannot_be_written_is_one_line(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    done = hazardhunt("run", *run_args(tmp_path / "notes.txt" / "run"))
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"--out: {tmp_path / 'notes.txt'} is a file, not a directory" in line
+    read_only = tmp_path / "read-only"
+    read_only.mkdir(mode=0o555)
+    if os.access(read_only, os.W_OK):
+        pytest.skip("this user may write anywhere (root)")
+    done = hazardhunt("run", *run_args(read_only / "run"))
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"--out: cannot write in {read_only}" in line
+    assert list(read_only.iterdir()) == []
+
+
+def test_a_corrupt_config_of_a_finished_run_is_one_line(tmp_path):
+    out = tmp_path / "run"
+    assert hazardhunt("run", *run_args(out)).returncode == 0
+    (out / "config.json").write_text('{"run": {"scenario": "head-on", ')
+    done = hazardhunt("run", *run_args(out))
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: {out}: holds a damaged run (config.json ")
+    assert "delete it or choose another --out" in line
+
+
+def test_ctrl_c_says_the_run_was_interrupted_and_how_to_resume(tmp_path):
+    out = tmp_path / "run"
+    command = [
+        sys.executable,
+        "-m",
+        "hazardhunt.cli",
+        "run",
+        *map(str, run_args(out, episodes=10_000)),
+    ]
+    environment = os.environ | {"COLUMNS": "1000"}
+    with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=environment) as process:
+        started = tmp_path / ".run.partial" / "config.json"
+        deadline = time.monotonic() + 120
+        while not started.exists() and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert started.exists(), "the run did not start"
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "Traceback" not in stderr
+    assert "interrupted: run the same command again to resume" in stderr.strip().splitlines()[-1]

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
+from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.scenario import load_scenario
 
 FLOOR = load_scenario("crossing").floor
@@ -27,6 +28,18 @@ def test_a_route_around_shelves_keeps_its_clearance_and_passes_the_waypoints():
 def test_an_unreachable_goal_is_a_clear_error():
     with pytest.raises(RoutePlanningError, match=r"within 0.50 m of an obstacle"):
         plan_route(FLOOR, np.array([2.0, 10.0]), np.zeros((0, 2)), np.array([5.0, 8.8]), 0.5)
+
+
+def test_a_route_around_a_column_of_10000_vertices_keeps_its_clearance():
+    angles = np.linspace(0.0, 2 * np.pi, 10_000, endpoint=False)
+    column = np.column_stack([10 + 2 * np.cos(angles), 10 + 2 * np.sin(angles)])
+    floor = FloorMap("open", 20.0, 20.0, (Obstacle("column", column),))
+    route = plan_route(floor, np.array([2.0, 10.0]), np.zeros((0, 2)), np.array([18.0, 10.0]), 0.5)
+    samples = [route.point_at(s) for s in np.linspace(0.0, route.length, 2000)]
+    assert min(floor.obstacle_clearance(p) for p in samples) >= 0.5 - 1e-6
+    # Around the column at 2.5 m from its centre: the straight legs and half the circle.
+    tangent = 2 * np.sqrt(8.0**2 - 2.5**2)
+    assert tangent < route.length < tangent + np.pi * 2.5 + 0.1
 
 
 def test_route_projection_and_interpolation():

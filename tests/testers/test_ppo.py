@@ -43,11 +43,11 @@ def test_effective_hyperparameters_are_saved(first_run):
 @pytest.mark.parametrize(
     ("params", "message"),
     [
-        ({"learning_rat": 1e-3}, "tester 'ppo-max': unknown parameter 'learning_rat'"),
-        ({"seed": 3}, "tester 'ppo-max': parameter 'seed' is set by hazardhunt"),
-        ({"env": "CartPole-v1"}, "parameter 'env' is set by hazardhunt"),
-        ({"device": "cuda"}, "parameter 'device' is set by hazardhunt"),
-        ({"n_envs": 0}, "n_envs must be a whole number >= 1, not 0"),
+        ({"learning_rat": 1e-3}, "tester 'ppo-max': learning_rat: unknown parameter"),
+        ({"seed": 3}, "tester 'ppo-max': seed: is set by hazardhunt"),
+        ({"env": "CartPole-v1"}, "env: is set by hazardhunt"),
+        ({"device": "cuda"}, "device: is set by hazardhunt"),
+        ({"n_envs": 0}, "n_envs: must be a whole number from 1 to 64, not 0"),
     ],
 )
 def test_bad_parameters_are_clear_errors(params, message):

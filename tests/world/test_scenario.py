@@ -60,6 +60,11 @@ def test_a_user_scenario_file_loads(tmp_path):
         (("x = 10.0, y = 5.0", "x = 5.0, y = 3.0"), "human.start: (5, 3) lies inside an obstacle"),
         (("x = 18.0, y = 10.0", "x = 25.0, y = 10.0"), "robot.goal: (25, 10) lies off"),
         (("name = ", "name = = "), "not valid TOML"),
+        (
+            ("heading_deg = 90.0", "heading_deg = nan"),
+            "human.start.heading_deg: Input should be a finite",
+        ),
+        (("x = 2.0, y = 10.0", "x = -inf, y = 10.0"), "robot.start.x: Input should be a finite"),
     ],
 )
 def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):
@@ -113,13 +118,45 @@ def map_file(tmp_path, table, polygon):
         ),
         ("obstacles", "[[0, 0], [1, 1], [2, 2]]", "obstacles.0.polygon: polygon has no area"),
         ("blind_zones", "[[0, 0], [1, 0], [1, 0]]", "blind_zones.0.polygon: polygon has no area"),
-        ("obstacles", "[[0, 0], [1, 0], [1, nan]]", "obstacles.0.polygon: vertices must be finite"),
+        (
+            "obstacles",
+            "[[0, 0], [1, 0], [1, nan]]",
+            "obstacles.0.polygon.2.1: Input should be a finite number",
+        ),
     ],
 )
 def test_a_polygon_that_is_not_a_simple_area_names_the_field(tmp_path, table, polygon, expected):
     with pytest.raises(ScenarioError) as caught:
         load_scenario(map_file(tmp_path, table, polygon))
     assert f"map.toml: {expected}" in str(caught.value)
+
+
+@pytest.mark.parametrize(("size", "key"), [("width = inf", "width"), ("height = nan", "height")])
+def test_a_map_of_no_finite_size_names_the_key(tmp_path, size, key):
+    write(
+        tmp_path,
+        f'name = "m"\n{size}\n' + ("height = 20.0\n" if key == "width" else "width = 20.0\n"),
+        "map.toml",
+    )
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(write(tmp_path, VALID.replace(SHOPFLOOR, "map.toml")))
+    assert f"map.toml: {key}: Input should be a finite number" in str(caught.value)
+
+
+def round_column(vertices: int) -> list[list[float]]:
+    """A column of radius 1.5 m at (15, 15) as a polygon of ``vertices`` vertices."""
+    angles = np.linspace(0.0, 2 * np.pi, vertices, endpoint=False)
+    return np.column_stack([15 + 1.5 * np.cos(angles), 15 + 1.5 * np.sin(angles)]).tolist()
+
+
+def test_a_polygon_of_10000_vertices_loads_and_one_that_crosses_itself_does_not(tmp_path):
+    column = round_column(10_000)
+    floor = load_scenario(map_file(tmp_path, "obstacles", column)).floor
+    assert len(floor.obstacles[0].polygon) == 10_000
+    assert floor.inside_obstacle(np.array([15.0, 15.0]))
+    column[5000], column[5001] = column[5001], column[5000]
+    with pytest.raises(ScenarioError, match=r"obstacles\.0\.polygon: polygon edges cross"):
+        load_scenario(map_file(tmp_path, "obstacles", column))
 
 
 def test_polygons_are_stored_counter_clockwise_in_the_order_given(tmp_path):

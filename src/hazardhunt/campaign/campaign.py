@@ -61,6 +61,7 @@ from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.run import (
     RunProgress,
     execute_run_atomically,
+    is_complete,
     is_finished,
     partial_directory,
     record_run,
@@ -149,12 +150,11 @@ def run_campaign(
     if workers < 1:
         raise ValueError(f"workers must be at least 1, not {workers}")
     runs = config.runs()
-    _check_run_ids(runs)
     _check_directory(config, out)
     out.mkdir(parents=True, exist_ok=True)
     with exclusive_lock(out / ".lock", out, "campaign"):
         _check_directory(config, out)  # another campaign may have claimed it before our lock
-        if not (out / "campaign.json").exists():
+        if not _holds_complete_runs(out):  # else it holds this campaign: checked above
             write_json_atomic(out / "campaign.json", config.model_dump(mode="json"))
         runs_directory = out / "runs"
         runs_directory.mkdir(exist_ok=True)
@@ -209,24 +209,17 @@ def _warn_of_other_versions(ledger: _Ledger, console: Console | None) -> None:
         )
 
 
-def _check_run_ids(runs: list[RunConfig]) -> None:
-    seen: dict[str, RunConfig] = {}
-    for run in runs:
-        other = seen.setdefault(run.run_id, run)
-        if other is not run:
-            raise ConfigError(
-                f"scenarios: {other.scenario!r} and {run.scenario!r} give the same run id "
-                f"{run.run_id!r}; rename one of the files"
-            )
-
-
 def _check_directory(config: CampaignConfig, out: Path) -> None:
-    """Refuse ``out`` unless it is absent, empty or a directory of this very campaign."""
+    """Refuse ``out`` unless it is absent, empty, a directory of this very campaign, or one of
+    another campaign that has no complete run (it is taken over: a campaign file fixed after
+    its runs failed is run again with the same command)."""
     stored_file = out / "campaign.json"
     if stored_file.is_file():
+        if not _holds_complete_runs(out):
+            return
         try:
             stored = CampaignConfig.model_validate_json(stored_file.read_bytes())
-        except ValidationError:
+        except (OSError, ValidationError):
             raise ConfigError(
                 f"{stored_file}: not a campaign configuration; use another --out"
             ) from None
@@ -239,6 +232,13 @@ def _check_directory(config: CampaignConfig, out: Path) -> None:
         not out.is_dir() or any(not p.name.startswith(".") for p in out.iterdir())
     ):
         raise ConfigError(f"{out}: exists and is not a campaign directory; use another --out")
+
+
+def _holds_complete_runs(out: Path) -> bool:
+    """Whether ``out/runs`` holds a complete run (a campaign directory without one holds no
+    result, and may be taken over by another campaign)."""
+    runs = out / "runs"
+    return runs.is_dir() and any(is_complete(directory) for directory in runs.iterdir())
 
 
 def _first_difference(stored: CampaignConfig, given: CampaignConfig) -> str:

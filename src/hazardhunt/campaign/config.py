@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import functools
+import itertools
+import os
 import re
 import sys
 from collections.abc import Callable
@@ -14,10 +16,14 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    Strict,
+    StrictInt,
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from hazardhunt.campaign.plugins import (
     PluginSpec,
@@ -26,11 +32,20 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
+from hazardhunt.sim.simulation import ROUTE_MARGIN
 from hazardhunt.sut.plugins import PluginError
-from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.sut.route import RoutePlanningError, plan_route
+from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
+from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
 from hazardhunt.world.bodies import RobotParams
-from hazardhunt.world.scenario import format_validation_error
+from hazardhunt.world.scenario import (
+    BUILTIN_SCENARIOS,
+    Scenario,
+    ScenarioError,
+    format_validation_error,
+    load_scenario,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -43,19 +58,28 @@ class ConfigError(ValueError):
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # Every float of a configuration is a finite number.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+Seconds = Annotated[float, Strict(), Field(gt=0)]
+"""A positive, finite time in s: an int or a float, not a string or a boolean."""
+
+MAX_EPISODE_DURATION = 3600.0
+"""The longest episode, in s of simulated time."""
 
 
 class EnvOptions(_Strict):
     """Environment parameters a run or campaign may override (defaults from SPEC)."""
 
-    decision_period: float = Field(default=2.0, gt=0)
-    """Time the human holds each action, in s (a multiple of 0.2 s)."""
+    decision_period: Seconds = 2.0
+    """Time the human holds each action, in s: a whole multiple of the controller's period
+    (0.2 s for the built-in NMPC), at most ``episode_duration``."""
     solver: Literal["fatrop", "ipopt"] = "fatrop"
     """The NMPC's solver."""
-    episode_duration: float = Field(default=30.0, gt=0)
+    episode_duration: Annotated[Seconds, Field(le=MAX_EPISODE_DURATION)] = 30.0
     """Simulated time after which an episode times out, in s."""
-    stall_duration: float = Field(default=10.0, gt=0)
+    stall_duration: Seconds = 10.0
     """Continuous emergency-stop time after which an episode stalls, in s."""
     controller_timeout: float | None = Field(default=None, gt=0, allow_inf_nan=False)
     """Wall-clock limit on each call of the controller, in s: a call that exceeds it ends the
@@ -64,37 +88,152 @@ class EnvOptions(_Strict):
     """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
     controller receives them in ``reset``."""
 
+    @model_validator(mode="after")
+    def _decision_fits_episode(self) -> EnvOptions:
+        if self.decision_period > self.episode_duration:
+            raise invalid(
+                ("decision_period",),
+                f"{self.decision_period:g} s is longer than an episode (episode_duration, "
+                f"{self.episode_duration:g} s)",
+                self.decision_period,
+            )
+        return self
+
+
+def invalid(location: tuple[str | int, ...], message: str, value: object) -> ValidationError:
+    """A validation error of the value at ``location`` (keys below the one being validated),
+    for a validator to raise: pydantic reports it under the full path of keys."""
+    error = PydanticCustomError("invalid", "{message}", {"message": message})
+    return ValidationError.from_exception_data(
+        "configuration", [InitErrorDetails(type=error, loc=location, input=value)]
+    )
+
+
+def decision_period_problem(decision_period: float, control_period: float) -> str | None:
+    """Why a human cannot hold each action for ``decision_period`` s against a controller
+    called every ``control_period`` s; None if it can (the tolerance of the simulation's own
+    check)."""
+    calls = round(decision_period / control_period)
+    if calls >= 1 and abs(calls * control_period - decision_period) <= 1e-9:
+        return None
+    return (
+        f"{decision_period:g} s is not a whole multiple of the controller's period "
+        f"({control_period:g} s)"
+    )
+
+
+def builtin_control_period() -> float:
+    """The period of the built-in NMPC, in s (its ``sample_time``)."""
+    from hazardhunt.sut.nmpc import NMPCParams
+
+    return NMPCParams().sample_time
+
+
+def _check_built_in_controller(env: EnvOptions, controller: PluginSpec | None) -> None:
+    """Raises a validation error at ``env.decision_period`` unless the built-in NMPC (when
+    ``controller`` is None) can run with it; a plug-in's period is checked by
+    :func:`check_plugins`."""
+    if controller is None:
+        problem = decision_period_problem(env.decision_period, builtin_control_period())
+        if problem is not None:
+            raise invalid(("env", "decision_period"), problem, env.decision_period)
+
+
+def _scenario_version(name: str) -> tuple[int, int] | None:
+    """The modification time and size of a scenario file; None for a built-in scenario or a
+    file that cannot be read (whose load then reports why)."""
+    if name in BUILTIN_SCENARIOS:
+        return None
+    try:
+        stat = Path(name).stat()
+    except OSError:
+        return None
+    return stat.st_mtime_ns, stat.st_size
+
+
+@functools.lru_cache(maxsize=64)
+def _load_version(name: str, version: tuple[int, int] | None) -> Scenario:
+    return load_scenario(name)
+
+
+def cached_scenario(name: str) -> Scenario:
+    """``load_scenario(name)``, loaded once per version of the file in this process: checking
+    every run of a campaign reads each scenario file once.
+
+    Raises:
+        ScenarioError: The scenario does not load.
+    """
+    return _load_version(name, _scenario_version(name))
+
+
+@functools.lru_cache(maxsize=64)
+def _route_version_problem(
+    name: str, version: tuple[int, int] | None, robot: RobotParams
+) -> str | None:
+    scenario = cached_scenario(name)
+    try:
+        plan_route(
+            scenario.floor,
+            scenario.robot_start.position,
+            scenario.waypoints,
+            scenario.goal,
+            robot.width / 2 + ROUTE_MARGIN,
+        )
+    except RoutePlanningError as error:
+        keys = ["robot.start", *(f"robot.waypoints.{i}" for i in range(len(scenario.waypoints)))]
+        keys.append("robot.goal")
+        key = keys[error.stops[-1]] if error.stops else "robot"
+        return f"{scenario.source}: {key}: the robot cannot get there: {error}"
+    return None
+
+
+def route_problem(name: str, robot: RobotParams) -> str | None:
+    """Why the robot cannot drive the route of scenario ``name`` (naming the file and the
+    route point), None if it can; planned once per version of the file and robot."""
+    return _route_version_problem(name, _scenario_version(name), robot)
+
 
 def _check_scenario(value: str) -> str:
-    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError, load_scenario
-
     if value in BUILTIN_SCENARIOS:
         return value
     if not value.endswith(".toml"):
         raise ValueError(
             f"unknown scenario {value!r}: use one of {', '.join(BUILTIN_SCENARIOS)} or a .toml file"
         )
+    # Absolute, so that replays, reports and exports find it from any working directory.
+    value = str(Path(value).resolve())
     # Load it now, so that a broken scenario file stops the campaign before any run starts.
     try:
-        load_scenario(value)
+        scenario_field_shapes(cached_scenario(value))
     except ScenarioError as error:
         raise ValueError(str(error)) from None
-    # Absolute, so that replays, reports and exports find it from any working directory.
-    return str(Path(value).resolve())
+    return value
 
 
 def _check_fields(scenario: str, fields: list[str]) -> None:
     """Raises ValueError unless every field is built in or defined by the scenario."""
     from hazardhunt.sut.safety_layer import field_shape
-    from hazardhunt.world.scenario import BUILTIN_SCENARIOS, load_scenario
 
     if all(f in FIELD_SETTINGS for f in fields):
         return
     if scenario not in BUILTIN_SCENARIOS and not Path(scenario).is_file():
         return  # the scenario's own error is reported
-    loaded = load_scenario(scenario)
+    loaded = cached_scenario(scenario)
     for name in fields:
         field_shape(loaded, name)
+
+
+def file_name(name: str) -> str:
+    """``name`` as one path component that stays where it is put: every run of characters
+    but letters, digits, ``_``, ``.`` and ``-`` becomes ``_``, and leading dots go."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).lstrip(".") or "_"
+
+
+def run_id_of(scenario: str, field: str, tester: str, seed: int) -> str:
+    """The name of a run's directory: its scenario's name, field, tester and seed, each made a
+    safe file name (see :func:`file_name`)."""
+    parts = (file_name(Path(scenario).stem), file_name(field), file_name(tester))
+    return "__".join(parts) + f"__seed{seed}"
 
 
 def _check_tester(value: str) -> str:
@@ -134,9 +273,9 @@ class RunConfig(_Strict):
     """A user's tester, whose name ``tester`` is; None for a registered tester."""
     tester: str = Field(min_length=1)
     """The search method: a registered tester (``TESTERS``) or the name of a user's."""
-    seed: int = Field(ge=0)
+    seed: StrictInt = Field(ge=0)
     """Seeds every random choice of the run."""
-    episodes: int = Field(gt=0)
+    episodes: StrictInt = Field(gt=0)
     """Budget: number of episodes."""
     env: EnvOptions = EnvOptions()
     tester_params: dict[str, Any] = {}
@@ -172,17 +311,21 @@ class RunConfig(_Strict):
             if values:
                 raise ValueError("a user's tester takes the parameters of tester_plugin")
         else:
-            _check_tester_params(info.data["tester"], values)
+            _check_tester_params(info.data["tester"], values, ())
         return values
+
+    @model_validator(mode="after")
+    def _runs_as_configured(self) -> RunConfig:
+        _check_built_in_controller(self.env, self.controller)
+        problem = route_problem(self.scenario, self.env.robot)
+        if problem is not None:
+            raise invalid(("scenario",), problem, self.scenario)
+        return self
 
     @property
     def run_id(self) -> str:
         """A file-system-safe name for the run, unique within a campaign."""
-        scenario, tester = (
-            re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
-            for name in (Path(self.scenario).stem, self.tester)
-        )
-        return f"{scenario}__{self.field}__{tester}__seed{self.seed}"
+        return run_id_of(self.scenario, self.field, self.tester, self.seed)
 
 
 class CampaignConfig(_Strict):
@@ -195,8 +338,8 @@ class CampaignConfig(_Strict):
     """Users' testers by name (in a campaign file, a ``[tester.NAME]`` table with a ``path``)."""
     testers: list[str] = Field(min_length=1)
     """Registered testers and names of ``tester_plugins``."""
-    seeds: list[int] = Field(min_length=1)
-    episodes: int = Field(gt=0)
+    seeds: list[StrictInt] = Field(min_length=1)
+    episodes: StrictInt = Field(gt=0)
     env: EnvOptions = EnvOptions()
     tester: dict[TesterName, dict[str, Any]] = {}
     """Per registered tester its keyword parameters, e.g. ``[tester.ppo-max]``."""
@@ -226,7 +369,7 @@ class CampaignConfig(_Strict):
     @classmethod
     def _testers_accept_params(cls, values: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         for name, params in values.items():
-            _check_tester_params(name, params)
+            _check_tester_params(name, params, (name,))
         return values
 
     @field_validator("seeds")
@@ -237,6 +380,34 @@ class CampaignConfig(_Strict):
         if len(set(values)) != len(values):
             raise ValueError("seeds must be distinct")
         return values
+
+    @model_validator(mode="after")
+    def _runs_as_configured(self) -> CampaignConfig:
+        _check_built_in_controller(self.env, self.controller)
+        for index, scenario in enumerate(self.scenarios):
+            problem = route_problem(scenario, self.env.robot)
+            if problem is not None:
+                raise invalid(("scenarios", index), problem, scenario)
+        self._check_run_ids()
+        return self
+
+    def _check_run_ids(self) -> None:
+        """Raises a validation error naming the key of two names that give one run id."""
+        seen: dict[str, tuple[str, str, str]] = {}
+        keys = ("scenarios", "fields", "testers")
+        for names in itertools.product(self.scenarios, self.fields, self.testers):
+            run_id = run_id_of(*names, seed=0)
+            other = seen.setdefault(run_id, names)
+            if other != names:
+                key, first, second = next(
+                    (key, a, b) for key, a, b in zip(keys, other, names, strict=True) if a != b
+                )
+                raise invalid(
+                    (key,),
+                    f"{first!r} and {second!r} give the same run directory "
+                    f"{run_id.removesuffix('__seed0')!r}; rename one",
+                    second,
+                )
 
     def runs(self) -> list[RunConfig]:
         """The runs of the grid, in a stable order."""
@@ -261,10 +432,17 @@ class CampaignConfig(_Strict):
         ]
 
 
-def _check_tester_params(tester: str, params: dict[str, Any]) -> None:
-    """Raises ValueError when tester ``tester`` does not accept ``params``."""
-    if params:
+def _check_tester_params(
+    tester: str, params: dict[str, Any], location: tuple[str | int, ...]
+) -> None:
+    """Raises a validation error at ``location`` + the parameter's key when tester ``tester``
+    does not accept ``params``."""
+    if not params:
+        return
+    try:
         make_tester(tester, 0, params)  # builds no model: only checks the parameters
+    except TesterParameterError as error:
+        raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
 
 
 def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignConfig:
@@ -282,6 +460,12 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such campaign file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not a campaign file") from None
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot be read: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{path}: not a text file: {error.reason}") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path}: not valid TOML: {error}") from error
     scenarios = data.get("scenarios")
@@ -335,6 +519,24 @@ def _tester_plugins(
     return plugins
 
 
+def check_output_location(out: Path, option: str = "--out") -> None:
+    """Raises ConfigError unless results can be written to ``out``: it is a directory or can be
+    made one (its nearest existing ancestor is a directory) that this process may write.
+    Nothing is created.
+
+    Args:
+        out: The run or campaign directory.
+        option: How the user named it, for the message.
+    """
+    existing = out.absolute()
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ConfigError(f"{option}: {existing} is a file, not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ConfigError(f"{option}: cannot write in {existing} (read-only, or no permission)")
+
+
 def check_plugins(config: RunConfig | CampaignConfig) -> None:
     """Build every plug-in ``config`` names once, so that a bad one stops a run or campaign
     before anything runs. Validating a configuration builds nothing; this is called where a
@@ -345,9 +547,15 @@ def check_plugins(config: RunConfig | CampaignConfig) -> None:
     """
     for key, spec, build in _plugins(config):
         try:
-            build(spec)
+            plugin = build(spec)
         except PluginError as error:
             raise ConfigError(f"{key}: {error}") from None
+        if key == "controller":
+            # build_controller has checked that it is a positive number.
+            period = float(getattr(plugin, "control_period", 0.0))
+            problem = decision_period_problem(config.env.decision_period, period)
+            if problem is not None:
+                raise ConfigError(f"env.decision_period: {problem}")
 
 
 def _plugins(

@@ -61,7 +61,8 @@ class CaseError(ValueError):
 
 
 class _CaseTable(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # Every number of a case file is finite.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class _CaseEnvironment(EnvOptions):

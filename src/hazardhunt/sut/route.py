@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 import shapely
-from shapely.geometry import LineString, Polygon
+from shapely.geometry import Polygon
 
 from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import FloatArray
@@ -22,6 +22,11 @@ from hazardhunt.world.geometry import FloatArray
 
 class RoutePlanningError(ValueError):
     """No collision-free route exists between two route points."""
+
+    def __init__(self, message: str, stops: tuple[int, ...] = ()) -> None:
+        super().__init__(message)
+        self.stops = stops
+        """The route points at fault, as indices into start, waypoints, goal."""
 
 
 @dataclass(frozen=True)
@@ -105,12 +110,27 @@ class Route:
         return best_s
 
 
+ROUTE_TOLERANCE = 0.01
+"""An inflated obstacle with detail finer than this, in m, is planned around as a simpler
+polygon that contains it and lies within twice this of it: a dense outline (a round column of
+thousands of vertices, a traced wall) then costs no more than a coarse one."""
+
+
 def inflated_obstacles(floor: FloorMap, inflation: float) -> list[Polygon]:
-    """The floor's obstacles grown by ``inflation`` m, with square corners."""
-    return [
-        Polygon(obstacle.polygon).buffer(inflation, join_style="mitre")
-        for obstacle in floor.obstacles
-    ]
+    """The floor's obstacles grown by ``inflation`` m, with square corners; an outline with
+    detail finer than :data:`ROUTE_TOLERANCE` is simplified first and grown by that much more,
+    so that it still holds everything within ``inflation`` of the obstacle."""
+    blocked = []
+    for obstacle in floor.obstacles:
+        outline = Polygon(obstacle.polygon)
+        simplified = outline.simplify(ROUTE_TOLERANCE)
+        if simplified.equals(outline):
+            blocked.append(outline.buffer(inflation, join_style="mitre"))
+        else:
+            # Every point of the outline lies within the tolerance of the simplified one.
+            grown = simplified.buffer(inflation + ROUTE_TOLERANCE, join_style="mitre")
+            blocked.append(grown)
+    return blocked
 
 
 def plan_route(
@@ -125,47 +145,68 @@ def plan_route(
 
     Raises:
         RoutePlanningError: When a route point lies inside an inflated obstacle or two
-            consecutive route points cannot be connected.
+            consecutive route points cannot be connected; its ``stops`` say which (indices
+            into start, waypoints, goal).
     """
     blocked = inflated_obstacles(floor, inflation)
     # Shrink by a hair so that paths along an inflated boundary or through its corners count
     # as free; the visibility-graph nodes sit a hair outside each corner for the same reason.
     solid = shapely.union_all([p.buffer(-1e-6, join_style="mitre") for p in blocked])
+    shapely.prepare(solid)
     corners = [
-        np.asarray(coord)
+        corner
         for polygon in blocked
-        for coord in polygon.buffer(1e-4, join_style="mitre").exterior.coords[:-1]
+        for corner in _convex_corners(polygon.buffer(1e-4, join_style="mitre"))
+        if floor.on_floor(corner) and not solid.contains(shapely.Point(corner))
     ]
-    corners = [c for c in corners if floor.on_floor(c) and not solid.contains(shapely.Point(c))]
     stops = [np.asarray(p, dtype=np.float64) for p in [start, *waypoints, goal]]
-    for stop in stops:
+    for index, stop in enumerate(stops):
         if solid.contains(shapely.Point(stop)):
             raise RoutePlanningError(
                 f"route point ({stop[0]:.2f}, {stop[1]:.2f}) lies within {inflation:.2f} m of an "
-                "obstacle"
+                "obstacle",
+                (index,),
             )
     route = [stops[0]]
-    for origin, target in itertools.pairwise(stops):
-        route.extend(_shortest_leg(origin, target, corners, solid)[1:])
+    for index, (origin, target) in enumerate(itertools.pairwise(stops)):
+        try:
+            route.extend(_shortest_leg(origin, target, corners, solid)[1:])
+        except RoutePlanningError as error:
+            raise RoutePlanningError(str(error), (index, index + 1)) from error
     deduplicated = [route[0]] + [
         p for previous, p in itertools.pairwise(route) if np.hypot(*(p - previous)) > 1e-9
     ]
     return Route(np.array(deduplicated))
 
 
+def _convex_corners(polygon: Polygon) -> list[FloatArray]:
+    """The vertices of ``polygon``'s outline where it turns outwards: the only places a
+    shortest path around it bends."""
+    ring = np.asarray(polygon.exterior.coords)[:-1]
+    incoming = ring - np.roll(ring, 1, axis=0)
+    outgoing = np.roll(ring, -1, axis=0) - ring
+    turn = incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0]
+    if not polygon.exterior.is_ccw:
+        turn = -turn
+    return list(ring[turn > 0])
+
+
 def _shortest_leg(
     origin: FloatArray, target: FloatArray, corners: list[FloatArray], solid: shapely.Geometry
 ) -> list[FloatArray]:
-    nodes = [origin, target, *corners]
-
-    def visible(a: FloatArray, b: FloatArray) -> bool:
-        return not solid.intersects(LineString([a, b]))
-
+    nodes = np.array([origin, target, *corners])
     graph = nx.Graph()
     graph.add_nodes_from(range(len(nodes)))
-    for i, j in itertools.combinations(range(len(nodes)), 2):
-        if visible(nodes[i], nodes[j]):
-            graph.add_edge(i, j, weight=float(np.hypot(*(nodes[i] - nodes[j]))))
+    for i in range(len(nodes) - 1):
+        others = np.arange(i + 1, len(nodes))
+        segments = shapely.linestrings(
+            np.stack([np.broadcast_to(nodes[i], (len(others), 2)), nodes[others]], axis=1)
+        )
+        visible = others[~shapely.intersects(solid, segments)]
+        lengths = np.hypot(*(nodes[visible] - nodes[i]).T)
+        graph.add_weighted_edges_from(
+            (i, int(j), float(length)) for j, length in zip(visible, lengths, strict=True)
+        )
     try:
         path = nx.shortest_path(graph, 0, 1, weight="weight")
     except nx.NetworkXNoPath as error:

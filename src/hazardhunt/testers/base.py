@@ -18,6 +18,21 @@ from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
 
+MAX_WORKER_PROCESSES = 64
+"""The most worker processes one run's tester may start (PPO's ``n_envs``, the searchers'
+``n_workers``): each holds a simulation and its own interpreter, some hundred MiB."""
+
+
+class TesterParameterError(ValueError):
+    """A tester parameter the tester does not take, or a value it cannot use; ``key`` names the
+    parameter and ``problem`` says what is wrong with it."""
+
+    def __init__(self, tester: str, key: str, problem: str) -> None:
+        super().__init__(f"tester {tester!r}: {key}: {problem}")
+        self.tester = tester
+        self.key = key
+        self.problem = problem
+
 
 @dataclass(frozen=True)
 class EpisodeRecord:

@@ -23,8 +23,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
 from hazardhunt.testers.novelty import FailureArchive
+
+MAX_POPULATION = 10_000
+"""The largest batch: the weights of its elites are kept in memory from the start."""
 
 COLLISION_SCORE = 100.0
 """The score of a failure that repeats a known mechanism; a new one scores up to twice it."""
@@ -61,21 +64,29 @@ class CrossEntropyTester:
         n_workers: Processes that play each batch (1: in the run's own process).
 
         Raises:
-            ValueError: A parameter out of its range.
+            TesterParameterError: A parameter out of its range.
         """
         checks = {
-            "population": (population, population >= 2),
-            "elite_fraction": (elite_fraction, 0.0 < elite_fraction <= 1.0),
-            "smoothing": (smoothing, 0.0 < smoothing <= 1.0),
-            "initial_std": (initial_std, initial_std > 0.0),
-            "min_std": (min_std, min_std >= 0.0),
-            "patience": (patience, patience >= 1),
-            "novelty_radius": (novelty_radius, novelty_radius > 0.0),
-            "n_workers": (n_workers, n_workers >= 1),
+            "population": (
+                population,
+                f"from 2 to {MAX_POPULATION:,}",
+                2 <= population <= MAX_POPULATION,
+            ),
+            "elite_fraction": (elite_fraction, "in (0, 1]", 0.0 < elite_fraction <= 1.0),
+            "smoothing": (smoothing, "in (0, 1]", 0.0 < smoothing <= 1.0),
+            "initial_std": (initial_std, "> 0", initial_std > 0.0),
+            "min_std": (min_std, ">= 0", min_std >= 0.0),
+            "patience": (patience, ">= 1", patience >= 1),
+            "novelty_radius": (novelty_radius, "> 0", novelty_radius > 0.0),
+            "n_workers": (
+                n_workers,
+                f"from 1 to {MAX_WORKER_PROCESSES}",
+                1 <= n_workers <= MAX_WORKER_PROCESSES,
+            ),
         }
-        for key, (value, ok) in checks.items():
+        for key, (value, wanted, ok) in checks.items():
             if not ok:
-                raise ValueError(f"tester 'cem': {key} is out of range: {value!r}")
+                raise TesterParameterError(self.name, key, f"must be {wanted}, not {value!r}")
         self.seed = seed
         self.population = population
         self.elites = max(1, round(elite_fraction * population))

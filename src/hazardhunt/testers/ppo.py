@@ -7,11 +7,13 @@ file overrides them.
 
 from __future__ import annotations
 
+import importlib.util
 import inspect
 import json
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import gymnasium as gym
 import numpy as np
@@ -24,7 +26,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
 from hazardhunt.testers.novelty import FailureArchive
 
 NOVELTY_CAP = 1.5
@@ -56,6 +58,132 @@ def ppo_defaults() -> dict[str, Any]:
     }
 
 
+MAX_NOVELTY = 1e6
+"""The largest weight of the novelty bonus (the risk reward is at most 200)."""
+
+MAX_ROLLOUT = 1_000_000
+"""The most decisions one rollout may hold (``n_steps`` x ``n_envs``): PPO keeps them all in
+memory."""
+
+POLICY_KWARGS = {
+    "net_arch": "the hidden layers' sizes, [64, 64], or a table {pi = [...], vf = [...]}",
+    "ortho_init": "true or false",
+    "log_std_init": "a finite number",
+    "full_std": "true or false",
+    "use_expln": "true or false",
+    "share_features_extractor": "true or false",
+}
+"""The MlpPolicy arguments a configuration may set in ``policy_kwargs``, and what each is."""
+
+
+def _is_whole(value: object) -> TypeGuard[int]:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: object) -> TypeGuard[float]:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _whole_at_least(least: int) -> tuple[str, Callable[[Any], bool]]:
+    return f"a whole number >= {least}", lambda v: _is_whole(v) and v >= least
+
+
+def _number_in(text: str, inside: Callable[[float], bool]) -> tuple[str, Callable[[Any], bool]]:
+    return f"a number {text}", lambda v: _is_number(v) and inside(v)
+
+
+_FLAG = ("true or false", lambda v: isinstance(v, bool))
+
+_PPO_VALUES: dict[str, tuple[str, Callable[[Any], bool]]] = {
+    "learning_rate": _number_in("in (0, 1]", lambda v: 0 < v <= 1),
+    "n_steps": _whole_at_least(1),
+    "batch_size": _whole_at_least(2),
+    "n_epochs": _whole_at_least(1),
+    "gamma": _number_in("in (0, 1]", lambda v: 0 < v <= 1),
+    "gae_lambda": _number_in("in [0, 1]", lambda v: 0 <= v <= 1),
+    "clip_range": _number_in("> 0", lambda v: v > 0),
+    "clip_range_vf": _number_in("> 0", lambda v: v > 0),
+    "normalize_advantage": _FLAG,
+    "ent_coef": _number_in(">= 0", lambda v: v >= 0),
+    "vf_coef": _number_in(">= 0", lambda v: v >= 0),
+    "max_grad_norm": _number_in("> 0", lambda v: v > 0),
+    "use_sde": _FLAG,
+    "sde_sample_freq": _whole_at_least(-1),
+    "target_kl": _number_in("> 0", lambda v: v > 0),
+    "stats_window_size": _whole_at_least(1),
+    "tensorboard_log": (
+        "a directory name, with the tensorboard package installed",
+        lambda v: isinstance(v, str) and importlib.util.find_spec("tensorboard") is not None,
+    ),
+    "policy_kwargs": ("a table", lambda v: isinstance(v, dict)),
+}
+"""What each PPO argument a configuration may set must be: the values Stable-Baselines3 (and
+torch's optimiser) accept, so that a bad one stops the run before it starts. The others (a
+rollout buffer class, a schedule) cannot be written in a configuration file."""
+
+
+def check_ppo_parameters(name: str, params: Mapping[str, Any], n_envs: object = 1) -> None:
+    """Raises :class:`TesterParameterError` unless every key of ``params`` is a PPO argument a
+    run may set, with a value PPO can use, and ``n_envs`` is a whole number of envs.
+
+    Args:
+        name: The tester's name, for the message.
+        params: PPO's keyword arguments (without the tester's own ``n_envs`` and ``novelty``).
+        n_envs: Copies of the env stepped at once.
+    """
+    if not _is_whole(n_envs) or not 1 <= n_envs <= MAX_WORKER_PROCESSES:
+        raise TesterParameterError(
+            name,
+            "n_envs",
+            f"must be a whole number from 1 to {MAX_WORKER_PROCESSES}, not {n_envs!r}",
+        )
+    defaults = ppo_defaults()
+    for key, value in params.items():
+        if key in RESERVED_PARAMETERS:
+            raise TesterParameterError(name, key, "is set by hazardhunt and cannot be overridden")
+        if key not in _PPO_VALUES:
+            known = sorted(k for k in defaults if k in _PPO_VALUES)
+            raise TesterParameterError(
+                name,
+                key,
+                f"unknown parameter; PPO takes {', '.join(known)}; the tester takes "
+                f"{', '.join(TESTER_PARAMETERS)}",
+            )
+        wanted, accepts = _PPO_VALUES[key]
+        if not accepts(value):
+            raise TesterParameterError(name, key, f"must be {wanted}, not {value!r}")
+    if "policy_kwargs" in params:
+        _check_policy_kwargs(name, params["policy_kwargs"])
+    rollout = params.get("n_steps", defaults["n_steps"]) * n_envs
+    if not 2 <= rollout <= MAX_ROLLOUT:
+        raise TesterParameterError(
+            name,
+            "n_steps",
+            f"n_steps x n_envs ({rollout}) must be from 2 to {MAX_ROLLOUT:,} decisions",
+        )
+
+
+def _check_policy_kwargs(name: str, values: Mapping[str, Any]) -> None:
+    for key, value in values.items():
+        where = f"policy_kwargs.{key}"
+        if key not in POLICY_KWARGS:
+            raise TesterParameterError(
+                name, where, f"unknown parameter; the policy takes {', '.join(POLICY_KWARGS)}"
+            )
+        if key == "net_arch":
+            layers = value.values() if isinstance(value, dict) else [value]
+            good = (not isinstance(value, dict) or set(value) <= {"pi", "vf"}) and all(
+                isinstance(sizes, list) and all(_is_whole(n) and 1 <= n <= 4096 for n in sizes)
+                for sizes in layers
+            )
+        elif key == "log_std_init":
+            good = _is_number(value)
+        else:
+            good = isinstance(value, bool)
+        if not good:
+            raise TesterParameterError(name, where, f"must be {POLICY_KWARGS[key]}, not {value!r}")
+
+
 class StopAtEpisodeBudget(BaseCallback):
     """Stops learning as soon as the recorder has seen ``episodes`` episodes."""
 
@@ -84,34 +212,23 @@ class PPOTester:
             ``learning_rate``, ...).
 
         Raises:
-            ValueError: A key of ``params`` is no PPO argument or one the tester sets itself.
+            TesterParameterError: A key of ``params`` is no PPO argument, or one the tester
+                sets itself, or its value is one PPO cannot use.
         """
         params = dict(params or {})
         n_envs = params.pop("n_envs", 1)
-        if isinstance(n_envs, bool) or not isinstance(n_envs, int) or n_envs < 1:
-            raise ValueError(f"tester {name!r}: n_envs must be a whole number >= 1, not {n_envs!r}")
         novelty = params.pop("novelty", 0.0)
         neighbours = params.pop("novelty_neighbours", 3)
-        if isinstance(novelty, bool) or not isinstance(novelty, (int, float)) or novelty < 0:
-            raise ValueError(f"tester {name!r}: novelty must be a number >= 0, not {novelty!r}")
-        if isinstance(neighbours, bool) or not isinstance(neighbours, int) or neighbours < 1:
-            raise ValueError(
-                f"tester {name!r}: novelty_neighbours must be a whole number >= 1, "
-                f"not {neighbours!r}"
+        check_ppo_parameters(name, params, n_envs)
+        if not _is_number(novelty) or not 0 <= novelty <= MAX_NOVELTY:
+            raise TesterParameterError(
+                name, "novelty", f"must be a number from 0 to {MAX_NOVELTY:g}, not {novelty!r}"
+            )
+        if not _is_whole(neighbours) or neighbours < 1:
+            raise TesterParameterError(
+                name, "novelty_neighbours", f"must be a whole number >= 1, not {neighbours!r}"
             )
         defaults = ppo_defaults()
-        for key in params:
-            if key in RESERVED_PARAMETERS:
-                raise ValueError(
-                    f"tester {name!r}: parameter {key!r} is set by hazardhunt and cannot be "
-                    "overridden"
-                )
-            if key not in defaults:
-                raise ValueError(
-                    f"tester {name!r}: unknown parameter {key!r}; "
-                    f"PPO accepts {', '.join(sorted(defaults))}; the tester accepts "
-                    f"{', '.join(TESTER_PARAMETERS)}"
-                )
         self.name = name
         self.reward: RewardKind = reward
         self.seed = seed

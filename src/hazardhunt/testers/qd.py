@@ -16,6 +16,7 @@ The run keeps the archive (``tester/archive.parquet``); the report draws it as a
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,9 +25,16 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES, describe
-from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
+
+MAX_CELLS = 1_000_000
+"""The most cells of the archive, which allocates them all at the start."""
+MAX_EMITTERS = 100
+"""The most emitters (each keeps a CMA-ES state over the whole action sequence)."""
+MAX_BATCH = 10_000
+"""The most episodes an emitter asks for at once."""
 
 
 class QualityDiversityTester:
@@ -61,31 +69,45 @@ class QualityDiversityTester:
         n_workers: Processes that play each batch (1: in the run's own process).
 
         Raises:
-            ValueError: An unknown measure or algorithm, or a setting out of its range.
+            TesterParameterError: An unknown measure or algorithm, or a setting out of its
+                range.
         """
-        measures, bins = list(measures), [int(b) for b in bins]
+        measures, bins = list(measures), list(bins)
         unknown = [m for m in measures if m not in DESCRIPTOR_NAMES]
         if unknown or not measures or len(set(measures)) != len(measures):
-            raise ValueError(
-                f"tester 'qd': measures must be distinct names of {', '.join(DESCRIPTOR_NAMES)}, "
-                f"not {measures!r}"
+            raise TesterParameterError(
+                self.name,
+                "measures",
+                f"must be distinct names of {', '.join(DESCRIPTOR_NAMES)}, not {measures!r}",
             )
-        if len(bins) != len(measures) or any(b < 1 for b in bins):
-            raise ValueError(
-                f"tester 'qd': bins must be one whole number >= 1 per measure, not {bins!r}"
+        if len(bins) != len(measures) or any(b < 1 for b in bins) or math.prod(bins) > MAX_CELLS:
+            raise TesterParameterError(
+                self.name,
+                "bins",
+                f"must be one whole number >= 1 per measure, at most {MAX_CELLS:,} cells in "
+                f"all, not {bins!r}",
             )
         if algorithm not in ALGORITHMS:
-            raise ValueError(
-                f"tester 'qd': algorithm must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}"
+            raise TesterParameterError(
+                self.name, "algorithm", f"must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}"
             )
-        for key, value in (("emitters", emitters), ("batch_size", batch_size)):
-            if value < 1:
-                raise ValueError(f"tester 'qd': {key} must be at least 1, not {value!r}")
-        if not (sigma0 > 0 and 0 < learning_rate <= 1 and n_workers >= 1):
-            raise ValueError("tester 'qd': sigma0 > 0, 0 < learning_rate <= 1, n_workers >= 1")
+        checks = {
+            "emitters": (emitters, f"from 1 to {MAX_EMITTERS}", 1 <= emitters <= MAX_EMITTERS),
+            "batch_size": (batch_size, f"from 1 to {MAX_BATCH:,}", 1 <= batch_size <= MAX_BATCH),
+            "sigma0": (sigma0, "> 0", sigma0 > 0),
+            "learning_rate": (learning_rate, "in (0, 1]", 0 < learning_rate <= 1),
+            "n_workers": (
+                n_workers,
+                f"from 1 to {MAX_WORKER_PROCESSES}",
+                1 <= n_workers <= MAX_WORKER_PROCESSES,
+            ),
+        }
+        for key, (value, wanted, ok) in checks.items():
+            if not ok:
+                raise TesterParameterError(self.name, key, f"must be {wanted}, not {value!r}")
         self.seed = seed
         self.measures = measures
-        self.bins = bins
+        self.bins = [int(b) for b in bins]
         self.algorithm = algorithm
         self.emitters = emitters
         self.batch_size = batch_size

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.testers.base import EpisodeRecorder
+from hazardhunt.testers.base import EpisodeRecorder, TesterParameterError
 
 
 class RandomTester:
@@ -26,7 +26,14 @@ class RandomTester:
         """Args:
         seed: Seeds the sampling.
         attempts: Draws per decision before falling back to turning on the spot.
+
+        Raises:
+            TesterParameterError: ``attempts`` is not a whole number >= 1.
         """
+        if isinstance(attempts, bool) or not isinstance(attempts, int) or attempts < 1:
+            raise TesterParameterError(
+                self.name, "attempts", f"must be a whole number >= 1, not {attempts!r}"
+            )
         self.seed = seed
         self.attempts = attempts
         self.rng = np.random.default_rng(seed)

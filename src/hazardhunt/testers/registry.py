@@ -14,6 +14,7 @@ the user's own process would not reach.
 from __future__ import annotations
 
 import inspect
+import math
 import zlib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from typing import Any
 
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.sut.plugins import PluginError, build
-from hazardhunt.testers.base import Tester
+from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.cem import CrossEntropyTester
 from hazardhunt.testers.qd import QualityDiversityTester
 from hazardhunt.testers.random_sampling import RandomTester
@@ -75,19 +76,77 @@ def make_tester(name: str, seed: int, params: Mapping[str, Any] | None = None) -
     """Build the registered tester ``name`` with keyword ``params``.
 
     Raises:
-        ValueError: ``name`` is not registered, or the tester does not take ``params``.
+        ValueError: ``name`` is not registered.
+        TesterParameterError: The tester does not take a parameter, or not its value.
     """
     if name not in _REGISTRY:
         raise ValueError(f"unknown tester {name!r}: use one of {', '.join(_REGISTRY)}")
     factory = _REGISTRY[name].factory
     params = dict(params or {})
-    if "seed" in params:
-        raise ValueError(f"tester {name!r}: parameter 'seed' is set by hazardhunt (the run's seed)")
-    try:
-        inspect.signature(factory).bind(seed=seed, **params)
-    except TypeError as error:
-        raise ValueError(f"tester {name!r} does not take these parameters: {error}") from None
+    check_parameter_types(name, factory, params)
     return factory(seed=seed, **params)
+
+
+def check_parameter_types(name: str, factory: TesterFactory, params: Mapping[str, Any]) -> None:
+    """Raises :class:`TesterParameterError` unless ``factory`` takes every key of ``params``
+    (but ``seed``, the run's), each value of the kind of the parameter's default: true or false
+    for a flag, a whole number for an int, a finite number for a float, a string, a list of
+    such. A factory that takes ``**params`` checks their names and values itself."""
+    if "seed" in params:
+        raise TesterParameterError(name, "seed", "is set by hazardhunt (the run's seed)")
+    parameters = inspect.signature(factory).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return
+    named = {
+        key: parameter.default
+        for key, parameter in parameters.items()
+        if key != "seed" and parameter.kind is not inspect.Parameter.VAR_POSITIONAL
+    }
+    for key, value in params.items():
+        if key not in named:
+            raise TesterParameterError(
+                name, key, f"unknown parameter; the tester takes {', '.join(named) or 'none'}"
+            )
+        wanted = _kind_of(named[key])
+        if wanted is not None and not _is_kind(value, named[key]):
+            raise TesterParameterError(name, key, f"must be {wanted}, not {value!r}")
+
+
+_KINDS: tuple[tuple[type, str, str], ...] = (
+    (bool, "true or false", "true or false"),
+    (int, "a whole number", "whole numbers"),
+    (float, "a finite number", "finite numbers"),
+    (str, "a string", "strings"),
+)
+"""Kinds of parameter defaults, first match wins (a bool is an int), and how a value of each is
+called, alone and in a list."""
+
+
+def _kind_of(default: object, plural: bool = False) -> str | None:
+    """What a value standing for ``default`` must be, in words; None if anything goes."""
+    for kind, one, many in _KINDS:
+        if isinstance(default, kind):
+            return many if plural else one
+    if isinstance(default, (list, tuple)):
+        entries = _kind_of(default[0], plural=True) if default else None
+        return "a list" + (f" of {entries}" if entries else "")
+    return None
+
+
+def _is_kind(value: object, default: object) -> bool:
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(default, bool) and isinstance(value, bool)
+    if isinstance(default, int):
+        return isinstance(value, int)
+    if isinstance(default, float):
+        return isinstance(value, (int, float)) and math.isfinite(value)
+    if isinstance(default, str):
+        return isinstance(value, str)
+    if isinstance(default, (list, tuple)):
+        return isinstance(value, (list, tuple)) and (
+            not default or all(_is_kind(entry, default[0]) for entry in value)
+        )
+    return True
 
 
 def build_tester(

@@ -74,7 +74,8 @@ class Scenario:
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # Every number of a scenario or map file is finite.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class _PointSpec(_Strict):
@@ -94,8 +95,6 @@ _GEOS_PROBLEM = re.compile(r"[^\[]+\[(?P<x>\S+) (?P<y>\S+)\]")
 
 
 def _check_polygon(polygon: list[Vertex]) -> list[Vertex]:
-    if not np.all(np.isfinite(np.asarray(polygon, dtype=np.float64))):
-        raise ValueError("vertices must be finite numbers")
     shape = Polygon(polygon)
     if shape.area < 1e-9:
         raise ValueError("polygon has no area")
