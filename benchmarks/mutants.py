@@ -183,7 +183,12 @@ def main() -> None:
         help="built-in tester names or package.module:Class import paths",
     )
     parser.add_argument("--scenarios", nargs="+", default=list(BUILTIN_SCENARIOS))
-    parser.add_argument("--fields", nargs="+", default=["1.25m"])
+    parser.add_argument(
+        "--fields",
+        nargs="+",
+        default=["none", "1.25m"],
+        help="field settings; with 'none' the controller alone stands between human and robot",
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--episodes", type=int, default=1000, help="budget per run")
     parser.add_argument("--early", type=int, default=100, help="the early budget, in episodes")

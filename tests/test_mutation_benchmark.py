@@ -21,7 +21,8 @@ def benchmark(*args: object) -> subprocess.CompletedProcess[str]:
 def test_the_benchmark_scores_a_tester_and_writes_its_results(tmp_path):
     out = tmp_path / "mutants.json"
     result = benchmark(
-        "--testers", "random", "--scenarios", "head-on", "--mutants", "BlindRightRear",
+        "--testers", "random", "--scenarios", "head-on", "--fields", "none",
+        "--mutants", "BlindRightRear",
         "--episodes", 2, "--early", 1, "--workers", 1, "--out", out,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
