@@ -39,10 +39,10 @@ from hazardhunt.campaign.replay import (
 )
 from hazardhunt.campaign.store import read_trajectory, write_bytes_atomic, write_json_atomic
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
-from hazardhunt.sim.simulation import ROUTE_MARGIN, Simulation
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
-from hazardhunt.sut.route import plan_route
+from hazardhunt.sut.route import scenario_route
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.world.scenario import load_scenario
 
@@ -519,13 +519,7 @@ def _recorded_picture(
     built)."""
     scenario = load_scenario(config.scenario)
     robot = config.env.robot
-    route = plan_route(
-        scenario.floor,
-        scenario.robot_start.position,
-        scenario.waypoints,
-        scenario.goal,
-        robot.width / 2 + ROUTE_MARGIN,
-    )
+    route = scenario_route(scenario, robot.width)
     trajectory = read_trajectory(directory, int(row["episode"]))
     return plot_episode(path, scenario, route, trajectory, field, title, str(row["outcome"]), robot)
 

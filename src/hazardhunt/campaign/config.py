@@ -32,9 +32,8 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
-from hazardhunt.sim.simulation import ROUTE_MARGIN
 from hazardhunt.sut.plugins import PluginError
-from hazardhunt.sut.route import RoutePlanningError, plan_route
+from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
@@ -172,13 +171,7 @@ def _route_version_problem(
 ) -> str | None:
     scenario = cached_scenario(name)
     try:
-        plan_route(
-            scenario.floor,
-            scenario.robot_start.position,
-            scenario.waypoints,
-            scenario.goal,
-            robot.width / 2 + ROUTE_MARGIN,
-        )
+        scenario_route(scenario, robot.width)
     except RoutePlanningError as error:
         keys = ["robot.start", *(f"robot.waypoints.{i}" for i in range(len(scenario.waypoints)))]
         keys.append("robot.goal")

@@ -35,7 +35,7 @@ from hazardhunt.sut.guard import (
     is_finite_number,
 )
 from hazardhunt.sut.protocols import ControlCommand, Controller, SafetyLayer, SafetyStatus
-from hazardhunt.sut.route import Route, RoutePlanningError, plan_route
+from hazardhunt.sut.route import Route, RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FieldShape, LaserSafetyLayer, field_shape
 from hazardhunt.sut.tracking import HumanTracker
 from hazardhunt.world.bodies import HumanParams, RobotParams, RobotState
@@ -46,9 +46,6 @@ from hazardhunt.world.geometry import (
 )
 from hazardhunt.world.kinematics import step_human, step_robot
 from hazardhunt.world.scenario import Scenario, ScenarioError, load_scenario
-
-ROUTE_MARGIN = 0.25
-"""Clearance the reference route keeps from obstacles beyond the robot's half width, in m."""
 
 TERMINAL_OUTCOMES = frozenset(
     {Outcome.GOAL, Outcome.FAILURE, Outcome.SAFE_CONTACT, Outcome.STALL, Outcome.SUT_ERROR}
@@ -170,13 +167,7 @@ class Simulation:
         self._physics_per_decision = self._control_every * controls_per_decision
         self._time_limit = TimeLimit(controller_timeout)
         try:
-            self.route: Route = plan_route(
-                scenario.floor,
-                scenario.robot_start.position,
-                scenario.waypoints,
-                scenario.goal,
-                robot.width / 2 + ROUTE_MARGIN,
-            )
+            self.route: Route = scenario_route(scenario, robot.width)
         except RoutePlanningError as error:
             raise ScenarioError(f"{scenario.source}: robot: {error}") from error
         self.tracker = HumanTracker(scenario.floor)

@@ -18,6 +18,7 @@ from shapely.geometry import Polygon
 
 from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import FloatArray
+from hazardhunt.world.scenario import Scenario
 
 
 class RoutePlanningError(ValueError):
@@ -215,3 +216,23 @@ def _shortest_leg(
             f"({target[0]:.2f}, {target[1]:.2f})"
         ) from error
     return [nodes[i] for i in path]
+
+
+ROUTE_MARGIN = 0.25
+"""Clearance the reference route keeps from obstacles beyond the robot's half width, in m."""
+
+
+def scenario_route(scenario: Scenario, robot_width: float) -> Route:
+    """The route a robot ``robot_width`` wide drives in ``scenario``: from its start through its
+    waypoints to its goal, ``ROUTE_MARGIN`` clear of the obstacles beyond its half width.
+
+    Raises:
+        RoutePlanningError: The robot cannot get there (see :func:`plan_route`).
+    """
+    return plan_route(
+        scenario.floor,
+        scenario.robot_start.position,
+        scenario.waypoints,
+        scenario.goal,
+        robot_width / 2 + ROUTE_MARGIN,
+    )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +32,21 @@ class TesterParameterError(ValueError):
         self.tester = tester
         self.key = key
         self.problem = problem
+
+
+def check_parameters(tester: str, checks: Mapping[str, tuple[object, str, bool]]) -> None:
+    """Raise for the first parameter whose check failed.
+
+    Args:
+        tester: The tester's name, for the message.
+        checks: Per parameter: its value, what it must be (``"> 0"``), whether it is.
+
+    Raises:
+        TesterParameterError: A value is not what it must be, naming the key.
+    """
+    for key, (value, wanted, ok) in checks.items():
+        if not ok:
+            raise TesterParameterError(tester, key, f"must be {wanted}, not {value!r}")
 
 
 @dataclass(frozen=True)

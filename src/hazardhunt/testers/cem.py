@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
+from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
 
 MAX_POPULATION = 10_000
@@ -84,9 +84,7 @@ class CrossEntropyTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
         }
-        for key, (value, wanted, ok) in checks.items():
-            if not ok:
-                raise TesterParameterError(self.name, key, f"must be {wanted}, not {value!r}")
+        check_parameters(self.name, checks)
         self.seed = seed
         self.population = population
         self.elites = max(1, round(elite_fraction * population))

@@ -25,7 +25,12 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES, describe
-from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
+from hazardhunt.testers.base import (
+    MAX_WORKER_PROCESSES,
+    EpisodeRecorder,
+    TesterParameterError,
+    check_parameters,
+)
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
 
@@ -102,9 +107,7 @@ class QualityDiversityTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
         }
-        for key, (value, wanted, ok) in checks.items():
-            if not ok:
-                raise TesterParameterError(self.name, key, f"must be {wanted}, not {value!r}")
+        check_parameters(self.name, checks)
         self.seed = seed
         self.measures = measures
         self.bins = [int(b) for b in bins]
