@@ -38,8 +38,23 @@ err_console = Console(stderr=True, soft_wrap=True)
 T = TypeVar("T")
 
 
+def _print_version(requested: bool) -> None:
+    if requested:
+        import hazardhunt
+
+        console.print(f"hazardhunt {hazardhunt.__version__}", highlight=False)
+        raise typer.Exit()
+
+
 @app.callback()
-def main() -> None:
+def main(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
     """hazardhunt: simulation-based safety testing of a mobile robot's control stack."""
 
 

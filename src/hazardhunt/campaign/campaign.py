@@ -758,7 +758,8 @@ def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
 
 
 def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
-    """Per scenario x field x tester: failures over seeds (mean ± std) and mean wall time."""
+    """Per scenario x field x tester: failures of the run, or over seeds their mean ± std, and
+    the mean wall time."""
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
@@ -766,7 +767,7 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
     table = Table("scenario", "field", "tester", "runs", "failures", "wall time (s)")
     for (scenario, field, tester), entries in groups.items():
         complete = [e for e in entries if e["status"] == "complete"]
-        failures = [float(e["failures"]) for e in complete]
+        failures = [int(e["failures"]) for e in complete]
         wall_times = [float(e["wall_time_s"]) for e in complete]
         table.add_row(
             scenario,
@@ -792,9 +793,10 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
         )
 
 
-def _mean_std(values: list[float]) -> str:
-    if not values:
+def _mean_std(counts: list[int]) -> str:
+    """One run's count as it is; the mean ± standard deviation of several."""
+    if not counts:
         return "-"
-    if len(values) == 1:
-        return f"{values[0]:.1f}"
-    return f"{statistics.fmean(values):.1f} ± {statistics.stdev(values):.1f}"
+    if len(counts) == 1:
+        return str(counts[0])
+    return f"{statistics.fmean(counts):.1f} ± {statistics.stdev(counts):.1f}"
