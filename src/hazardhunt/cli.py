@@ -544,6 +544,29 @@ def regress(
         raise typer.Exit(1)
 
 
+@app.command("new-sut")
+def new_sut(
+    directory: Annotated[Path, typer.Argument(help="A new folder for the files (created).")],
+) -> None:
+    """Write a starting point for testing your own system: a controller plug-in, a floor map
+    and a scenario to edit, a campaign file and a README of the next commands."""
+    from importlib import resources
+
+    if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
+        raise ConfigError(f"{directory}: exists and is not empty; name a new folder")
+    directory.mkdir(parents=True, exist_ok=True)
+    templates = resources.files("hazardhunt") / "templates" / "new_sut"
+    names = sorted(t.name for t in templates.iterdir() if t.is_file())
+    for name in names:
+        (directory / name).write_text((templates / name).read_text(encoding="utf-8"))
+    console.print(f"written to [bold]{escape(str(directory))}[/bold]: {', '.join(names)}")
+    console.print(
+        f"next: cd {escape(str(directory))} && hazardhunt campaign campaign.toml --out results "
+        "--workers 2 (README.md has the commands after it)",
+        highlight=False,
+    )
+
+
 def _validated(build: Callable[[], T]) -> T:
     from pydantic import ValidationError
 
