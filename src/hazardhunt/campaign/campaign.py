@@ -106,6 +106,8 @@ class RunOutcome:
     error: str | None = None
     """``Type: message`` of the exception, when the run raised."""
     traceback: str | None = None
+    ray_node: str | None = None
+    """The id of the Ray node that executed the run (the ``ray`` executor only)."""
 
 
 OnEpisodes = Callable[[str, int], None]
@@ -286,6 +288,8 @@ class _Ledger:
         run = outcome.config
         if outcome.summary is not None:
             entry = {"status": "complete"} | _ledger_entry(outcome.summary)
+            if outcome.ray_node is not None:
+                entry["ray_node"] = outcome.ray_node
         else:
             failure = {"error": outcome.error, "traceback": outcome.traceback}
             entry = {"status": "failed"} | _run_keys(run) | failure
@@ -692,7 +696,7 @@ def _execute_on_ray(
             [ready], _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ready)
             try:
-                archive = ray.get(ready)
+                archive, node = ray.get(ready)
             except ray.exceptions.RayError as error:
                 # The cause names the run's own exception; the error holds its remote traceback.
                 cause = getattr(error, "cause", None) or error
@@ -703,7 +707,7 @@ def _execute_on_ray(
             except (OSError, RuntimeError) as error:
                 on_outcome(_failed(run, error))
                 continue
-            on_outcome(RunOutcome(run, summary))
+            on_outcome(RunOutcome(run, summary, ray_node=node))
     except BaseException:
         for reference in pending:
             ray.cancel(reference, force=True)
@@ -713,15 +717,19 @@ def _execute_on_ray(
             ray.shutdown()
 
 
-def _run_packed(run: RunConfig) -> bytes:
-    """Execute ``run`` in a scratch directory and return that directory as a tar archive."""
+def _run_packed(run: RunConfig) -> tuple[bytes, str]:
+    """Execute ``run`` in a scratch directory: that directory as a tar archive, and the id of
+    the Ray node it executed on."""
+    import ray
+
+    node = ray.get_runtime_context().get_node_id()
     with tempfile.TemporaryDirectory(prefix="hazardhunt-run-") as scratch:
         directory = Path(scratch) / run.run_id
         record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:
             archive.add(directory, arcname=".")
-        return buffer.getvalue()
+        return buffer.getvalue(), node
 
 
 def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
