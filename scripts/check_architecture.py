@@ -19,6 +19,7 @@ from collections import defaultdict
 from pathlib import Path
 
 LAYERS = (
+    "templates",  # files `hazardhunt new-sut` writes for a user to edit: nothing imports them
     "cli",
     "cases",
     "analysis",

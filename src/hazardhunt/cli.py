@@ -38,8 +38,23 @@ err_console = Console(stderr=True, soft_wrap=True)
 T = TypeVar("T")
 
 
+def _print_version(requested: bool) -> None:
+    if requested:
+        import hazardhunt
+
+        console.print(f"hazardhunt {hazardhunt.__version__}", highlight=False)
+        raise typer.Exit()
+
+
 @app.callback()
-def main() -> None:
+def main(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
+        ),
+    ] = False,
+) -> None:
     """hazardhunt: simulation-based safety testing of a mobile robot's control stack."""
 
 
@@ -527,6 +542,29 @@ def regress(
         console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
     if counts["still fails"] or counts["changed"]:
         raise typer.Exit(1)
+
+
+@app.command("new-sut")
+def new_sut(
+    directory: Annotated[Path, typer.Argument(help="A new folder for the files (created).")],
+) -> None:
+    """Write a starting point for testing your own system: a controller plug-in, a floor map
+    and a scenario to edit, a campaign file and a README of the next commands."""
+    from importlib import resources
+
+    if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
+        raise ConfigError(f"{directory}: exists and is not empty; name a new folder")
+    directory.mkdir(parents=True, exist_ok=True)
+    templates = resources.files("hazardhunt") / "templates" / "new_sut"
+    names = sorted(t.name for t in templates.iterdir() if t.is_file())
+    for name in names:
+        (directory / name).write_text((templates / name).read_text(encoding="utf-8"))
+    console.print(f"written to [bold]{escape(str(directory))}[/bold]: {', '.join(names)}")
+    console.print(
+        f"next: cd {escape(str(directory))} && hazardhunt campaign campaign.toml --out results "
+        "--workers 2 (README.md has the commands after it)",
+        highlight=False,
+    )
 
 
 def _validated(build: Callable[[], T]) -> T:

@@ -160,6 +160,23 @@ def test_running_a_complete_campaign_again_changes_no_run(
     assert snapshot(reference / "runs") == before
 
 
+def test_the_end_of_run_table_counts_failures_in_whole_numbers(tmp_path: Path) -> None:
+    file, out = tmp_path / "one-seed.toml", tmp_path / "campaign"
+    file.write_text(GRID.replace("seeds = [0, 1]", "seeds = [0]"))
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    rows = {
+        cells[0]: cells
+        for line in result.stdout.splitlines()
+        if line.startswith("│")
+        for cells in [[cell.strip() for cell in line.strip("│").split("│")]]
+    }
+    recorded = json.loads((out / "summary.json").read_text())["runs"]
+    assert {entry["scenario"]: entry["failures"] for entry in recorded}["overtaking"] > 0
+    for entry in recorded:
+        assert rows[entry["scenario"]][4] == str(entry["failures"])  # 4, not 4.0
+
+
 @pytest.mark.slow
 def test_ray_records_the_same_episodes_as_local(
     campaign_file: Path, reference: Path, tmp_path: Path

@@ -106,6 +106,8 @@ class RunOutcome:
     error: str | None = None
     """``Type: message`` of the exception, when the run raised."""
     traceback: str | None = None
+    ray_node: str | None = None
+    """The id of the Ray node that executed the run (the ``ray`` executor only)."""
 
 
 OnEpisodes = Callable[[str, int], None]
@@ -286,6 +288,8 @@ class _Ledger:
         run = outcome.config
         if outcome.summary is not None:
             entry = {"status": "complete"} | _ledger_entry(outcome.summary)
+            if outcome.ray_node is not None:
+                entry["ray_node"] = outcome.ray_node
         else:
             failure = {"error": outcome.error, "traceback": outcome.traceback}
             entry = {"status": "failed"} | _run_keys(run) | failure
@@ -692,7 +696,7 @@ def _execute_on_ray(
             [ready], _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ready)
             try:
-                archive = ray.get(ready)
+                archive, node = ray.get(ready)
             except ray.exceptions.RayError as error:
                 # The cause names the run's own exception; the error holds its remote traceback.
                 cause = getattr(error, "cause", None) or error
@@ -703,7 +707,7 @@ def _execute_on_ray(
             except (OSError, RuntimeError) as error:
                 on_outcome(_failed(run, error))
                 continue
-            on_outcome(RunOutcome(run, summary))
+            on_outcome(RunOutcome(run, summary, ray_node=node))
     except BaseException:
         for reference in pending:
             ray.cancel(reference, force=True)
@@ -713,15 +717,19 @@ def _execute_on_ray(
             ray.shutdown()
 
 
-def _run_packed(run: RunConfig) -> bytes:
-    """Execute ``run`` in a scratch directory and return that directory as a tar archive."""
+def _run_packed(run: RunConfig) -> tuple[bytes, str]:
+    """Execute ``run`` in a scratch directory: that directory as a tar archive, and the id of
+    the Ray node it executed on."""
+    import ray
+
+    node = ray.get_runtime_context().get_node_id()
     with tempfile.TemporaryDirectory(prefix="hazardhunt-run-") as scratch:
         directory = Path(scratch) / run.run_id
         record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:
             archive.add(directory, arcname=".")
-        return buffer.getvalue()
+        return buffer.getvalue(), node
 
 
 def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
@@ -758,7 +766,8 @@ def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
 
 
 def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
-    """Per scenario x field x tester: failures over seeds (mean ± std) and mean wall time."""
+    """Per scenario x field x tester: failures of the run, or over seeds their mean ± std, and
+    the mean wall time."""
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
@@ -766,7 +775,7 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
     table = Table("scenario", "field", "tester", "runs", "failures", "wall time (s)")
     for (scenario, field, tester), entries in groups.items():
         complete = [e for e in entries if e["status"] == "complete"]
-        failures = [float(e["failures"]) for e in complete]
+        failures = [int(e["failures"]) for e in complete]
         wall_times = [float(e["wall_time_s"]) for e in complete]
         table.add_row(
             scenario,
@@ -792,9 +801,10 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
         )
 
 
-def _mean_std(values: list[float]) -> str:
-    if not values:
+def _mean_std(counts: list[int]) -> str:
+    """One run's count as it is; the mean ± standard deviation of several."""
+    if not counts:
         return "-"
-    if len(values) == 1:
-        return f"{values[0]:.1f}"
-    return f"{statistics.fmean(values):.1f} ± {statistics.stdev(values):.1f}"
+    if len(counts) == 1:
+        return str(counts[0])
+    return f"{statistics.fmean(counts):.1f} ± {statistics.stdev(counts):.1f}"

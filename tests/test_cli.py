@@ -1,0 +1,109 @@
+"""The `hazardhunt` command itself: its version, and the starting point for your own SUT."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import hazardhunt
+from tests.helpers import hazardhunt as command
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+PYPROJECT = Path(__file__).parents[1] / "pyproject.toml"
+
+
+def test_version_prints_the_package_version() -> None:
+    result = command("--version")
+    assert result.returncode == 0, result.stderr
+    packaged = tomllib.loads(PYPROJECT.read_text())["project"]["version"]
+    assert result.stdout == f"hazardhunt {packaged}\n"
+    assert hazardhunt.__version__ == packaged
+
+
+def test_new_sut_writes_a_starting_point_and_refuses_a_folder_in_use(tmp_path: Path) -> None:
+    folder = tmp_path / "my_robot"
+    result = command("new-sut", folder)
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "README.md",
+        "campaign.toml",
+        "my_controller.py",
+        "my_floor.toml",
+        "my_scenario.toml",
+    ]
+    readme = (folder / "README.md").read_text()
+    for step in ("hazardhunt campaign campaign.toml", "hazardhunt report", "hazardhunt regress"):
+        assert step in readme
+    before = (folder / "my_controller.py").read_text()
+    again = command("new-sut", folder)
+    assert again.returncode == 2
+    assert again.stderr.strip().splitlines() == [
+        f"error: {folder}: exists and is not empty; name a new folder"
+    ]
+    assert (folder / "my_controller.py").read_text() == before
+
+
+def test_the_new_controller_drives_its_scenario_and_meets_the_robot_it_is_given(
+    tmp_path: Path,
+) -> None:
+    """The generated controller and scenario in a short run, with a slower robot than the
+    default: the controller takes its speed limit from the robot it is given."""
+    folder = tmp_path / "my_robot"
+    assert command("new-sut", folder).returncode == 0
+    spec = importlib.util.spec_from_file_location("my_controller", folder / "my_controller.py")
+    assert spec is not None
+    assert spec.loader is not None
+    generated = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generated)  # the generated file, unmodified
+    from hazardhunt.sim import Simulation
+    from hazardhunt.world.bodies import RobotParams
+
+    standing = np.zeros((15, 2))
+    standing[:, 0] = -1.0  # the human stands still where it starts, out of the robot's way
+    for robot in (RobotParams(), RobotParams(max_speed=0.6)):
+        simulation = Simulation.build(
+            str(folder / "my_scenario.toml"),
+            "sides",
+            controller=generated.MyController(),
+            robot=robot,
+        )
+        result = simulation.simulate(standing)
+        assert result.summary.outcome == "goal"
+        top_speed = max(sample.robot_speed for sample in result.trajectory)
+        assert robot.max_speed - 0.05 < top_speed <= robot.max_speed + 1e-9
+
+
+@pytest.mark.slow
+def test_the_new_sut_folder_runs_its_readme_commands_unmodified(tmp_path: Path) -> None:
+    folder = tmp_path / "my_robot"
+    assert command("new-sut", folder).returncode == 0
+    # The README's commands, from the folder, as a user types them.
+    campaign = command(
+        "campaign", "campaign.toml", "--out", "results", "--workers", "2", cwd=folder, timeout=600
+    )
+    assert campaign.returncode == 0, campaign.stderr
+    summary = json.loads((folder / "results" / "summary.json").read_text())
+    assert summary["runs_complete"] == summary["runs_total"] == 4
+    for entry in summary["runs"]:
+        config = json.loads(
+            (folder / "results" / "runs" / entry["run_id"] / "config.json").read_text()
+        )
+        assert config["run"]["controller"]["path"] == "my_controller:MyController"
+    found = {(e["field"], e["tester"]): e["failures"] for e in summary["runs"]}
+    assert found[("none", "cem")] > found[("none", "random")]
+    report = command("report", "results", cwd=folder)
+    assert report.returncode == 0, report.stderr
+    assert (folder / "results" / "report" / "index.html").is_file()
+    assert command("export", "results", "--out", "cases", cwd=folder).returncode == 0
+    regress = command("regress", "cases", "--controller", "my_controller:MyController", cwd=folder)
+    assert regress.returncode == 1, regress.stderr  # the failures are still there
+    assert "still fails" in regress.stdout
