@@ -81,14 +81,25 @@ def checked_command(returned: object) -> ControlCommand:
         )
     if not (math.isfinite(returned.solve_time_s) and returned.solve_time_s >= 0):
         raise UnusableReturnError(f"control() returned a solve_time_s of {returned.solve_time_s}")
+    planned = _points("planned_positions", returned.planned_positions)
+    predicted = _points("predicted_human", returned.predicted_human)
+    if (
+        type(returned.speed) is float
+        and type(returned.yaw_rate) is float
+        and type(returned.failed) is bool
+        and type(returned.solve_time_s) is float
+        and planned is returned.planned_positions
+        and predicted is returned.predicted_human
+    ):
+        return returned  # already what the simulation plays and records
     return dataclasses.replace(
         returned,
         speed=float(returned.speed),
         yaw_rate=float(returned.yaw_rate),
         failed=bool(returned.failed),
         solve_time_s=float(returned.solve_time_s),
-        planned_positions=_points("planned_positions", returned.planned_positions),
-        predicted_human=_points("predicted_human", returned.predicted_human),
+        planned_positions=planned,
+        predicted_human=predicted,
     )
 
 
@@ -101,12 +112,13 @@ def checked_status(returned: object) -> SafetyStatus:
     if not isinstance(returned, SafetyStatus):
         raise UnusableReturnError(f"update() returned {_described(returned)}, not a SafetyStatus")
     flags = (returned.emergency_stop, returned.human_in_field)
-    if not all(isinstance(flag, (bool, np.bool_)) for flag in flags):
+    plain = type(returned) is SafetyStatus and type(flags[0]) is bool and type(flags[1]) is bool
+    if not plain and not all(isinstance(flag, (bool, np.bool_)) for flag in flags):
         raise UnusableReturnError(
             f"update() returned a SafetyStatus of {_described(flags[0])} and "
             f"{_described(flags[1])}, not two bools"
         )
-    return SafetyStatus(bool(flags[0]), bool(flags[1]))
+    return returned if plain else SafetyStatus(bool(flags[0]), bool(flags[1]))
 
 
 def is_finite_number(value: object) -> bool:

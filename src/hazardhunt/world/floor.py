@@ -102,13 +102,48 @@ class FloorMap:
 
     def discs_clear(self, centers: FloatArray, radius: float) -> bool:
         """Whether discs at all of ``centers`` (P, 2) stay on the floor and off every obstacle
-        edge (the check for a path sampled finer than the disc's radius)."""
-        on_floor = (
-            np.all(centers >= radius)
-            and np.all(centers[:, 0] <= self.width - radius)
-            and np.all(centers[:, 1] <= self.height - radius)
+        edge (the check for a path sampled finer than the disc's radius).
+
+        The arithmetic of :func:`~hazardhunt.world.geometry.distances_to_segments` on Python
+        floats, for the edges of the obstacles whose bounding boxes come near the discs.
+        """
+        xs, ys = centers[:, 0], centers[:, 1]
+        x_min, x_max, y_min, y_max = (
+            float(xs.min()),
+            float(xs.max()),
+            float(ys.min()),
+            float(ys.max()),
         )
-        return bool(on_floor and np.all(distances_to_segments(centers, self.edges) >= radius))
+        on_floor = (
+            x_min >= radius
+            and y_min >= radius
+            and x_max <= self.width - radius
+            and y_max <= self.height - radius
+        )
+        if not on_floor:
+            return False
+        # Obstacles whose bounding box stays farther than ``radius`` plus a margin far above
+        # the rounding error cannot decide the answer: only the others are checked.
+        reach = radius + 1e-9
+        near = [
+            (box, edges)
+            for box, edges in zip(self.bounding_boxes, self._segments, strict=True)
+            if box[0] - x_max < reach
+            and x_min - box[2] < reach
+            and box[1] - y_max < reach
+            and y_min - box[3] < reach
+        ]
+        if not near:
+            return True
+        for x, y in centers.tolist():
+            for (box_x_min, box_y_min, box_x_max, box_y_max), edges in near:
+                dx = box_x_min - x if x < box_x_min else x - box_x_max if x > box_x_max else 0.0
+                dy = box_y_min - y if y < box_y_min else y - box_y_max if y > box_y_max else 0.0
+                if dx >= reach or dy >= reach:
+                    continue
+                if _disc_meets_edges(x, y, radius, edges):
+                    return False
+        return True
 
     def obstacle_clearance(self, point: FloatArray) -> float:
         """Distance from a point to the nearest obstacle boundary, negative inside one, in m."""
@@ -186,6 +221,21 @@ class FloorMap:
     def in_blind_zone(self, point: FloatArray) -> bool:
         """Whether the cameras cannot see a point."""
         return any(point_in_polygon(point, zone) for zone in self.blind_zones)
+
+
+def _disc_meets_edges(
+    x: float, y: float, radius: float, edges: tuple[tuple[float, ...], ...]
+) -> bool:
+    """Whether a disc comes closer than ``radius`` to any of a polygon's edges (its
+    ``FloorMap._segments``); the arithmetic of ``distances_to_segments``."""
+    for _, start_x, start_y, _, dx, dy, length_sq in edges:
+        ox, oy = x - start_x, y - start_y
+        t = (ox * dx + oy * dy) / length_sq
+        t = min(max(t, 0.0), 1.0)
+        gx, gy = ox - t * dx, oy - t * dy
+        if math.sqrt(gx * gx + gy * gy) < radius:
+            return True
+    return False
 
 
 def _disc_meets_polygon(
