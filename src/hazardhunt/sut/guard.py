@@ -22,7 +22,7 @@ import time
 import warnings
 from collections.abc import Callable
 from types import FrameType
-from typing import Any, TypeVar
+from typing import Any, TypeGuard, TypeVar
 
 import numpy as np
 
@@ -54,6 +54,8 @@ def checked_command(returned: object) -> ControlCommand:
     Raises:
         UnusableReturnError: Saying what is wrong.
     """
+    if _plain_command(returned):
+        return returned
     if not isinstance(returned, ControlCommand):
         raise UnusableReturnError(
             f"control() returned {_described(returned)}, not a ControlCommand"
@@ -81,25 +83,44 @@ def checked_command(returned: object) -> ControlCommand:
         )
     if not (math.isfinite(returned.solve_time_s) and returned.solve_time_s >= 0):
         raise UnusableReturnError(f"control() returned a solve_time_s of {returned.solve_time_s}")
-    planned = _points("planned_positions", returned.planned_positions)
-    predicted = _points("predicted_human", returned.predicted_human)
-    if (
-        type(returned.speed) is float
-        and type(returned.yaw_rate) is float
-        and type(returned.failed) is bool
-        and type(returned.solve_time_s) is float
-        and planned is returned.planned_positions
-        and predicted is returned.predicted_human
-    ):
-        return returned  # already what the simulation plays and records
     return dataclasses.replace(
         returned,
         speed=float(returned.speed),
         yaw_rate=float(returned.yaw_rate),
         failed=bool(returned.failed),
         solve_time_s=float(returned.solve_time_s),
-        planned_positions=planned,
-        predicted_human=predicted,
+        planned_positions=_points("planned_positions", returned.planned_positions),
+        predicted_human=_points("predicted_human", returned.predicted_human),
+    )
+
+
+def _plain_command(command: object) -> TypeGuard[ControlCommand]:
+    """Whether ``command`` is a usable ControlCommand whose values are already what
+    :func:`checked_command` makes of them (floats, a bool, a string, float64 arrays of (x, y)
+    rows): the usual command, checked without building a copy."""
+    if type(command) is not ControlCommand:
+        return False
+    speed, yaw_rate, solve_time = command.speed, command.yaw_rate, command.solve_time_s
+    return (
+        type(speed) is float
+        and type(yaw_rate) is float
+        and type(solve_time) is float
+        and type(command.failed) is bool
+        and type(command.status) is str
+        and (command.failed or (math.isfinite(speed) and math.isfinite(yaw_rate)))
+        and math.isfinite(solve_time)
+        and solve_time >= 0
+        and _plain_points(command.planned_positions)
+        and _plain_points(command.predicted_human)
+    )
+
+
+def _plain_points(value: object) -> bool:
+    return value is None or (
+        type(value) is np.ndarray
+        and value.dtype == np.float64
+        and value.ndim == 2
+        and value.shape[1] == 2
     )
 
 
