@@ -82,3 +82,33 @@ def test_disc_blocked_agrees_with_the_edge_arrays_everywhere_on_the_floor():
     ]
     assert blocked == expected
     assert 0.2 < np.mean(blocked) < 0.8  # both answers are exercised
+
+
+def test_discs_clear_agrees_with_the_edge_arrays_on_paths_and_at_touching_distance():
+    # Skipping obstacles by their bounding boxes must answer exactly as the distances to
+    # every edge, also for discs that touch a shelf or miss it by a hair.
+    floor = load_scenario("crossing").floor
+    rng = np.random.default_rng(4)
+    radius = 0.25
+    paths = [
+        rng.uniform(0.0, 20.0, size=2) + np.cumsum(rng.normal(scale=0.05, size=(40, 2)), axis=0)
+        for _ in range(600)
+    ]
+    along_shelf = np.linspace(2.0, 8.0, 40)  # above shelf block SW-2, whose top is y = 8.5
+    touching = [
+        np.column_stack([along_shelf, np.full(40, 8.5 + radius + gap)])
+        for gap in (0.0, 1e-12, -1e-12)
+    ]
+    clear = [floor.discs_clear(path, radius) for path in paths + touching]
+    expected = [
+        bool(
+            np.all(path >= radius)
+            and np.all(path[:, 0] <= floor.width - radius)
+            and np.all(path[:, 1] <= floor.height - radius)
+            and np.all(distances_to_segments(path, floor.edges) >= radius)
+        )
+        for path in paths + touching
+    ]
+    assert clear == expected
+    assert clear[-3:] == [True, True, False]
+    assert 0.2 < np.mean(clear) < 0.8  # both answers are exercised

@@ -40,11 +40,11 @@ from hazardhunt.sut.safety_layer import FieldShape, LaserSafetyLayer, field_shap
 from hazardhunt.sut.tracking import HumanTracker
 from hazardhunt.world.bodies import HumanParams, RobotParams, RobotState
 from hazardhunt.world.geometry import (
+    point_in_body_frame,
     point_rectangle_clearance,
     rectangle_face,
-    to_body_frame,
 )
-from hazardhunt.world.kinematics import step_human, step_robot
+from hazardhunt.world.kinematics import move_human, step_robot
 from hazardhunt.world.scenario import Scenario, ScenarioError, load_scenario
 
 TERMINAL_OUTCOMES = frozenset(
@@ -171,6 +171,9 @@ class Simulation:
         except RoutePlanningError as error:
             raise ScenarioError(f"{scenario.source}: robot: {error}") from error
         self.tracker = HumanTracker(scenario.floor)
+        self._human_x, self._human_y = 0.0, 0.0  # the human's position: reset() sets it
+        goal_x, goal_y = self.route.points[-1].tolist()
+        self._goal: tuple[float, float] = (goal_x, goal_y)
         self._max_steps = round(termination.episode_duration / physics_step)
         self._started = False
 
@@ -236,9 +239,9 @@ class Simulation:
         """Put human and robot at the scenario's initial state."""
         start = self.scenario.robot_start
         self.robot = RobotState(start.x, start.y, start.heading, 0.0, 0.0)
-        self.human_position = self.scenario.human_start.position.copy()
+        self.human_position = self.scenario.human_start.position
         self.human_heading = self.scenario.human_start.heading
-        self.human_velocity = np.zeros(2)
+        self._human_velocity = (0.0, 0.0)
         self.emergency_stop = False
         self.human_in_field = False
         self.human_visible = True
@@ -385,8 +388,9 @@ class Simulation:
             self.robot_params,
             emergency_stop=self.emergency_stop,
         )
-        human = step_human(
-            self.human_position,
+        human = move_human(
+            self._human_x,
+            self._human_y,
             self.human_heading,
             speed,
             turn_rate,
@@ -394,8 +398,8 @@ class Simulation:
             self.scenario.floor,
             self.human_params.radius,
         )
-        self.human_position, self.human_heading = human.position, human.heading
-        self.human_velocity = human.velocity
+        self._human_x, self._human_y, self.human_heading = human.x, human.y, human.heading
+        self._human_velocity = (human.velocity_x, human.velocity_y)
         self._steps += 1
         return self._judge()
 
@@ -426,23 +430,26 @@ class Simulation:
         robot = self.robot
         forward, left, self.clearance = self._human_in_robot_frame()
         contact = self.clearance <= 0.0
-        length, width = self.robot_params.length, self.robot_params.width
-        face = rectangle_face(forward, left, length, width) if contact else ""
-        verdict = judge_contact(
-            contact, face, robot.speed, robot.heading, self.human_velocity, self.safety_spec
-        )
-        velocity_x, velocity_y = self.human_velocity.tolist()
+        face, verdict, human_speed = "", ContactVerdict.NONE, 0.0
+        if contact:
+            length, width = self.robot_params.length, self.robot_params.width
+            face = rectangle_face(forward, left, length, width)
+            verdict = judge_contact(
+                contact, face, robot.speed, robot.heading, self.human_velocity, self.safety_spec
+            )
+            # The risk reads the human's speed only on an unsafe contact.
+            human_speed = float(np.hypot(*self._human_velocity))
         step_risk = risk(
             verdict is ContactVerdict.UNSAFE,
             contact,
-            float(np.hypot(velocity_x, velocity_y)),
+            human_speed,
             robot.speed,
             self.clearance,
             self.risk_params,
         )
         self._risks.append(step_risk)
         self._stop_steps = self._stop_steps + 1 if self.emergency_stop else 0
-        goal_x, goal_y = self.route.points[-1].tolist()
+        goal_x, goal_y = self._goal
         self.outcome = episode_outcome(
             verdict,
             goal_reached=math.hypot(robot.x - goal_x, robot.y - goal_y)
@@ -515,7 +522,9 @@ class Simulation:
         """The human's centre in the robot's frame (ahead, to the left, in m) and the clearance
         between the human disc and the robot's rectangle (m, negative: overlap)."""
         robot = self.robot
-        forward, left = to_body_frame(self.human_position, robot.x, robot.y, robot.heading)
+        forward, left = point_in_body_frame(
+            self._human_x, self._human_y, robot.x, robot.y, robot.heading
+        )
         outline = point_rectangle_clearance(
             forward, left, self.robot_params.length, self.robot_params.width
         )
@@ -539,7 +548,22 @@ class Simulation:
     @property
     def human_pose(self) -> tuple[float, float, float]:
         """The human's current position (m) and heading (rad)."""
-        return float(self.human_position[0]), float(self.human_position[1]), self.human_heading
+        return self._human_x, self._human_y, self.human_heading
+
+    @property
+    def human_position(self) -> NDArray[np.float64]:
+        """The human's current position, (x, y) in m (a new array at every call)."""
+        return np.array([self._human_x, self._human_y])
+
+    @human_position.setter
+    def human_position(self, position: Sequence[float] | NDArray[np.floating[Any]]) -> None:
+        self._human_x, self._human_y = float(position[0]), float(position[1])
+
+    @property
+    def human_velocity(self) -> NDArray[np.float64]:
+        """The human's velocity over the last physics step, (x, y) in m/s (zero when blocked;
+        a new array at every call)."""
+        return np.array(self._human_velocity)
 
     @property
     def actions(self) -> NDArray[np.float32]:
@@ -578,8 +602,8 @@ class Simulation:
         self._samples.append(
             (
                 self.sim_time,
-                float(self.human_position[0]),
-                float(self.human_position[1]),
+                self._human_x,
+                self._human_y,
                 self.human_heading,
                 robot.x,
                 robot.y,

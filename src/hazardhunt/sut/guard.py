@@ -22,7 +22,7 @@ import time
 import warnings
 from collections.abc import Callable
 from types import FrameType
-from typing import Any, TypeVar
+from typing import Any, TypeGuard, TypeVar
 
 import numpy as np
 
@@ -54,6 +54,8 @@ def checked_command(returned: object) -> ControlCommand:
     Raises:
         UnusableReturnError: Saying what is wrong.
     """
+    if _plain_command(returned):
+        return returned
     if not isinstance(returned, ControlCommand):
         raise UnusableReturnError(
             f"control() returned {_described(returned)}, not a ControlCommand"
@@ -92,6 +94,36 @@ def checked_command(returned: object) -> ControlCommand:
     )
 
 
+def _plain_command(command: object) -> TypeGuard[ControlCommand]:
+    """Whether ``command`` is a usable ControlCommand whose values are already what
+    :func:`checked_command` makes of them (floats, a bool, a string, float64 arrays of (x, y)
+    rows): the usual command, checked without building a copy."""
+    if type(command) is not ControlCommand:
+        return False
+    speed, yaw_rate, solve_time = command.speed, command.yaw_rate, command.solve_time_s
+    return (
+        type(speed) is float
+        and type(yaw_rate) is float
+        and type(solve_time) is float
+        and type(command.failed) is bool
+        and type(command.status) is str
+        and (command.failed or (math.isfinite(speed) and math.isfinite(yaw_rate)))
+        and math.isfinite(solve_time)
+        and solve_time >= 0
+        and _plain_points(command.planned_positions)
+        and _plain_points(command.predicted_human)
+    )
+
+
+def _plain_points(value: object) -> bool:
+    return value is None or (
+        type(value) is np.ndarray
+        and value.dtype == np.float64
+        and value.ndim == 2
+        and value.shape[1] == 2
+    )
+
+
 def checked_status(returned: object) -> SafetyStatus:
     """``returned`` as the safety layer's verdict: a SafetyStatus of two bools.
 
@@ -101,12 +133,13 @@ def checked_status(returned: object) -> SafetyStatus:
     if not isinstance(returned, SafetyStatus):
         raise UnusableReturnError(f"update() returned {_described(returned)}, not a SafetyStatus")
     flags = (returned.emergency_stop, returned.human_in_field)
-    if not all(isinstance(flag, (bool, np.bool_)) for flag in flags):
+    plain = type(returned) is SafetyStatus and type(flags[0]) is bool and type(flags[1]) is bool
+    if not plain and not all(isinstance(flag, (bool, np.bool_)) for flag in flags):
         raise UnusableReturnError(
             f"update() returned a SafetyStatus of {_described(flags[0])} and "
             f"{_described(flags[1])}, not two bools"
         )
-    return SafetyStatus(bool(flags[0]), bool(flags[1]))
+    return returned if plain else SafetyStatus(bool(flags[0]), bool(flags[1]))
 
 
 def is_finite_number(value: object) -> bool:

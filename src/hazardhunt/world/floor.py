@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,6 +54,9 @@ class FloorMap:
     """Per obstacle its edges as (index into ``edges``, start x, start y, end y, direction x,
     direction y, squared length or 1 for a zero-length edge), Python floats for scalar
     queries."""
+    _cells_by_radius: dict[float, _ObstacleCells] = field(init=False, repr=False, compare=False)
+    """Per disc radius: which obstacles a disc centred in each cell of a grid over the floor
+    may touch (:meth:`_cells`)."""
 
     def __post_init__(self) -> None:
         polygons = [o.polygon for o in self.obstacles]
@@ -81,6 +85,7 @@ class FloorMap:
             for owner in range(len(self.obstacles))
         )
         object.__setattr__(self, "_segments", segments)
+        object.__setattr__(self, "_cells_by_radius", {})
 
     def inside_obstacle(self, point: FloatArray) -> bool:
         """Whether a point lies strictly inside any obstacle (even-odd rule, all at once)."""
@@ -102,13 +107,48 @@ class FloorMap:
 
     def discs_clear(self, centers: FloatArray, radius: float) -> bool:
         """Whether discs at all of ``centers`` (P, 2) stay on the floor and off every obstacle
-        edge (the check for a path sampled finer than the disc's radius)."""
-        on_floor = (
-            np.all(centers >= radius)
-            and np.all(centers[:, 0] <= self.width - radius)
-            and np.all(centers[:, 1] <= self.height - radius)
+        edge (the check for a path sampled finer than the disc's radius).
+
+        The arithmetic of :func:`~hazardhunt.world.geometry.distances_to_segments` on Python
+        floats, for the edges of the obstacles whose bounding boxes come near the discs.
+        """
+        xs, ys = centers[:, 0], centers[:, 1]
+        x_min, x_max, y_min, y_max = (
+            float(xs.min()),
+            float(xs.max()),
+            float(ys.min()),
+            float(ys.max()),
         )
-        return bool(on_floor and np.all(distances_to_segments(centers, self.edges) >= radius))
+        on_floor = (
+            x_min >= radius
+            and y_min >= radius
+            and x_max <= self.width - radius
+            and y_max <= self.height - radius
+        )
+        if not on_floor:
+            return False
+        # Obstacles whose bounding box stays farther than ``radius`` plus a margin far above
+        # the rounding error cannot decide the answer: only the others are checked.
+        reach = radius + 1e-9
+        near = [
+            (box, edges)
+            for box, edges in zip(self.bounding_boxes, self._segments, strict=True)
+            if box[0] - x_max < reach
+            and x_min - box[2] < reach
+            and box[1] - y_max < reach
+            and y_min - box[3] < reach
+        ]
+        if not near:
+            return True
+        for x, y in centers.tolist():
+            for (box_x_min, box_y_min, box_x_max, box_y_max), edges in near:
+                dx = box_x_min - x if x < box_x_min else x - box_x_max if x > box_x_max else 0.0
+                dy = box_y_min - y if y < box_y_min else y - box_y_max if y > box_y_max else 0.0
+                if dx >= reach or dy >= reach:
+                    continue
+                if _disc_meets_edges(x, y, radius, edges):
+                    return False
+        return True
 
     def obstacle_clearance(self, point: FloatArray) -> float:
         """Distance from a point to the nearest obstacle boundary, negative inside one, in m."""
@@ -165,9 +205,8 @@ class FloorMap:
         if not (radius <= x <= self.width - radius and radius <= y <= self.height - radius):
             return True
         limit = radius * radius
-        for (x_min, y_min, x_max, y_max), edges in zip(
-            self.bounding_boxes, self._segments, strict=True
-        ):
+        cells = self._cells_by_radius.get(radius) or self._cells(radius)
+        for (x_min, y_min, x_max, y_max), edges in cells.near(x, y):
             # A disc at least ``radius`` from an obstacle's bounding box is at least that far
             # from the obstacle and outside it: most queries end here.
             dx = x_min - x if x < x_min else x - x_max if x > x_max else 0.0
@@ -178,6 +217,13 @@ class FloorMap:
                 return True
         return False
 
+    def _cells(self, radius: float) -> _ObstacleCells:
+        """The obstacles a disc of ``radius`` may touch, per cell of a grid over the floor
+        (built at the first query for the radius, then kept)."""
+        cells = _ObstacleCells(self.width, self.height, radius, self.bounding_boxes, self._segments)
+        self._cells_by_radius[radius] = cells
+        return cells
+
     def on_floor(self, point: FloatArray, margin: float = 0.0) -> bool:
         """Whether a point lies on the floor at least ``margin`` from its outer edge."""
         x, y = float(point[0]), float(point[1])
@@ -186,6 +232,64 @@ class FloorMap:
     def in_blind_zone(self, point: FloatArray) -> bool:
         """Whether the cameras cannot see a point."""
         return any(point_in_polygon(point, zone) for zone in self.blind_zones)
+
+
+class _ObstacleCells:
+    """A grid of square cells over the floor, each listing the obstacles (bounding box and
+    edges) that a disc of a given radius centred in the cell may touch; a disc query then
+    looks at a few obstacles instead of all."""
+
+    SIZE = 0.5
+    """Side of a cell, in m."""
+
+    def __init__(
+        self,
+        width: float,
+        height: float,
+        radius: float,
+        boxes: tuple[tuple[float, float, float, float], ...],
+        segments: tuple[tuple[tuple[int, float, float, float, float, float, float], ...], ...],
+    ) -> None:
+        size = self.SIZE
+        self.columns = int(width / size) + 1
+        rows = int(height / size) + 1
+        cells: list[list[tuple[Any, Any]]] = [[] for _ in range(self.columns * rows)]
+        # An obstacle is listed in every cell its bounding box, grown by the radius plus a
+        # margin far above the rounding error of a cell's index, overlaps.
+        reach = radius + 1e-6
+        for box, edges in zip(boxes, segments, strict=True):
+            x_min, y_min, x_max, y_max = box
+            for row in range(max(int((y_min - reach) / size), 0), rows):
+                if row * size > y_max + reach:
+                    break
+                for column in range(max(int((x_min - reach) / size), 0), self.columns):
+                    if column * size > x_max + reach:
+                        break
+                    cells[row * self.columns + column].append((box, edges))
+        self.cells = tuple(tuple(cell) for cell in cells)
+
+    def near(
+        self, x: float, y: float
+    ) -> tuple[tuple[tuple[float, float, float, float], tuple[tuple[float, ...], ...]], ...]:
+        """The obstacles a disc centred at (x, y), a point on the floor, may touch, in the
+        floor's order."""
+        size = self.SIZE
+        return self.cells[int(y / size) * self.columns + int(x / size)]
+
+
+def _disc_meets_edges(
+    x: float, y: float, radius: float, edges: tuple[tuple[float, ...], ...]
+) -> bool:
+    """Whether a disc comes closer than ``radius`` to any of a polygon's edges (its
+    ``FloorMap._segments``); the arithmetic of ``distances_to_segments``."""
+    for _, start_x, start_y, _, dx, dy, length_sq in edges:
+        ox, oy = x - start_x, y - start_y
+        t = (ox * dx + oy * dy) / length_sq
+        t = min(max(t, 0.0), 1.0)
+        gx, gy = ox - t * dx, oy - t * dy
+        if math.sqrt(gx * gx + gy * gy) < radius:
+            return True
+    return False
 
 
 def _disc_meets_polygon(

@@ -20,8 +20,15 @@ def to_body_frame(point: FloatArray, x: float, y: float, heading: float) -> tupl
     Returns:
         (forward, left): the point's coordinates along and across the heading, in m.
     """
-    dx = float(point[0]) - x
-    dy = float(point[1]) - y
+    return point_in_body_frame(float(point[0]), float(point[1]), x, y, heading)
+
+
+def point_in_body_frame(
+    point_x: float, point_y: float, x: float, y: float, heading: float
+) -> tuple[float, float]:
+    """:func:`to_body_frame` for the world point (point_x, point_y)."""
+    dx = point_x - x
+    dy = point_y - y
     cos_h, sin_h = math.cos(heading), math.sin(heading)
     return cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy
 

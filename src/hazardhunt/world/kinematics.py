@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,6 +27,23 @@ class HumanMotion:
     """True when an obstacle shortened the step."""
 
 
+class HumanStep(NamedTuple):
+    """The human after one physics step, on Python floats (what the simulation's loop keeps)."""
+
+    x: float
+    """m"""
+    y: float
+    """m"""
+    heading: float
+    """rad"""
+    velocity_x: float
+    """Actual velocity over the step (zero when blocked), in m/s."""
+    velocity_y: float
+    """m/s"""
+    blocked: bool
+    """True when an obstacle shortened the step."""
+
+
 def step_human(
     position: FloatArray,
     heading: float,
@@ -40,14 +58,37 @@ def step_human(
     At contact the human slides along the obstacle (the part of the step that points into it is
     removed); where sliding is blocked too (a corner), it stops. It never passes through.
     """
+    moved = move_human(
+        float(position[0]), float(position[1]), heading, speed, turn_rate, dt, floor, radius
+    )
+    return HumanMotion(
+        np.array([moved.x, moved.y]),
+        moved.heading,
+        np.array([moved.velocity_x, moved.velocity_y]),
+        moved.blocked,
+    )
+
+
+def move_human(
+    x: float,
+    y: float,
+    heading: float,
+    speed: float,
+    turn_rate: float,
+    dt: float,
+    floor: FloorMap,
+    radius: float,
+) -> HumanStep:
+    """:func:`step_human` for a human at (x, y), on floats: no arrays unless an obstacle
+    blocks the step."""
     new_heading = heading + turn_rate * dt
     mid_heading = heading + 0.5 * turn_rate * dt
     distance = speed * dt
     step_x, step_y = distance * math.cos(mid_heading), distance * math.sin(mid_heading)
-    target_x, target_y = float(position[0]) + step_x, float(position[1]) + step_y
+    target_x, target_y = x + step_x, y + step_y
     if not floor.disc_blocked_at(target_x, target_y, radius):
-        velocity = np.array([step_x / dt, step_y / dt])
-        return HumanMotion(np.array([target_x, target_y]), new_heading, velocity, False)
+        return HumanStep(target_x, target_y, new_heading, step_x / dt, step_y / dt, False)
+    position = np.array([x, y])
     step = np.array([step_x, step_y])
     nearest = floor.nearest_obstacle_point(position)
     away = position - nearest
@@ -57,8 +98,9 @@ def step_human(
         slide = step - min(float(np.dot(step, normal)), 0.0) * normal
         target = position + slide
         if not floor.disc_blocked(target, radius):
-            return HumanMotion(target, new_heading, slide / dt, True)
-    return HumanMotion(position.copy(), new_heading, np.zeros(2), True)
+            (target_x, target_y), (velocity_x, velocity_y) = target.tolist(), (slide / dt).tolist()
+            return HumanStep(target_x, target_y, new_heading, velocity_x, velocity_y, True)
+    return HumanStep(x, y, new_heading, 0.0, 0.0, True)
 
 
 def step_robot(
