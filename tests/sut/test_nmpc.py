@@ -124,7 +124,14 @@ def ipopt_controller() -> NMPCController:
 
 
 @pytest.mark.parametrize(
-    "change", [{"horizon": 0}, {"sample_time": 0.0}, {"obstacle_slots": -1}, {"solver": "sqp"}]
+    "change",
+    [
+        {"horizon": 0},
+        {"sample_time": 0.0},
+        {"obstacle_slots": -1},
+        {"solver": "sqp"},
+        {"barrier_decrease_power": 2.0},
+    ],
 )
 def test_rejects_meaningless_parameters(change: dict[str, Any]) -> None:
     with pytest.raises(ValueError, match=next(iter(change))):

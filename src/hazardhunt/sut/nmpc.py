@@ -122,11 +122,19 @@ class NMPCParams:
     """Initial barrier parameter of warm-started solves (the solvers' default 0.1, kept for solves
     from a rollout, suits a cold start); small because the shifted plan usually lies close to the
     solution: about 5 instead of 7 iterations."""
-    bound_push: float = 1e-6
+    barrier_decrease_power: float = 1.8
+    """Superlinear decrease of the barrier parameter in warm-started solves: the next barrier
+    is at most the current one to this power (fatrop's and IPOPT's
+    ``mu_superlinear_decrease_power``, between 1 and 2, default 1.5). From 1.7 up, a
+    warm-started solve needs about one iteration less (median 4 instead of 5) and reaches the
+    same optimum: on recorded closed-loop problems the first commands stay within 3e-5 of
+    IPOPT's at a tolerance of 1e-10."""
+    bound_push: float = 1e-4
     """How far warm-started solves move the initial guess into the interior of its bounds,
     absolute and relative (fatrop's ``bound_push``/``bound_frac``, IPOPT's
     ``warm_start_*_push``/``_frac``; defaults 1e-2); small so that inactive slacks stay near
-    zero."""
+    zero. Together with ``barrier_decrease_power`` = 1.8, 1e-4 took fewer iterations and failed
+    fewer solves on recorded closed-loop problems than 1e-6 (the value before), 1e-5 or 1e-3."""
     compiled: bool = True
     """Solve with fatrop's solver generated as C code and compiled by gcc
     (:mod:`hazardhunt.sut.compiled`): the same iterates, without CasADi's per-call bookkeeping.
@@ -148,10 +156,16 @@ class NMPCParams:
             "max_iterations": self.max_iterations,
             "warm_max_iterations": self.warm_max_iterations,
             "tolerance": self.tolerance,
+            "bound_push": self.bound_push,
         }
         for name, value in positive.items():
             if not value > 0:
                 raise ValueError(f"NMPCParams.{name} must be positive, got {value}")
+        if not 1.0 < self.barrier_decrease_power < 2.0:
+            raise ValueError(
+                "NMPCParams.barrier_decrease_power must be between 1 and 2, got "
+                f"{self.barrier_decrease_power}"
+            )
         if self.obstacle_slots < 0:
             raise ValueError(f"NMPCParams.obstacle_slots must be >= 0, got {self.obstacle_slots}")
         if self.solver not in ("fatrop", "ipopt"):
@@ -734,6 +748,7 @@ def _solver_options(params: NMPCParams, equality: list[bool], warm: bool) -> dic
             fatrop.update(
                 max_iter=params.warm_max_iterations,
                 mu_init=params.initial_barrier,
+                mu_superlinear_decrease_power=params.barrier_decrease_power,
                 bound_push=params.bound_push,
                 bound_frac=params.bound_push,
             )
@@ -749,6 +764,7 @@ def _solver_options(params: NMPCParams, equality: list[bool], warm: bool) -> dic
             ipopt.update(
                 max_iter=params.warm_max_iterations,
                 mu_init=params.initial_barrier,
+                mu_superlinear_decrease_power=params.barrier_decrease_power,
                 warm_start_init_point="yes",
             )
             for name in (
