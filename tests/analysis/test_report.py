@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -122,7 +123,7 @@ def all_failures(campaign: Path) -> pd.DataFrame:
     return pd.concat(
         pd.read_parquet(run / "failures.parquet").assign(run_id=run.name)
         for run in sorted((campaign / "runs").iterdir())
-    )
+    ).reset_index(drop=True)
 
 
 def test_the_verdict_counts_the_campaigns_failures_and_mechanisms(campaign, report):
@@ -152,11 +153,14 @@ def test_the_verdict_says_which_tester_found_what(campaign, report):
 
 
 def test_the_verdict_shows_the_failure_of_highest_risk_replayed(campaign, report):
-    failures = all_failures(campaign)
-    worst = failures.loc[failures["max_risk"].idxmax()]
+    failures = all_failures(campaign).set_index(["run_id", "episode"])
     page = (report / "index.html").read_text()
     verdict = page[page.index('<section id="verdict"') : page.index("</section>")]
-    assert f"Worst: {worst['class']}, {worst['run_id']}, episode {worst['episode']}" in verdict
+    shown = re.search(r'alt="Worst: ([^,]+), (\S+), episode (\d+)"', verdict)
+    assert shown, "no picture of the worst failure"
+    worst = failures.loc[(shown[2], int(shown[3]))]
+    assert worst["class"] == shown[1]
+    assert worst["max_risk"] == failures["max_risk"].max()
     assert f"risk {worst['max_risk']:.0f}" in verdict
     for suffix in ("png", "gif"):
         assert (report / "figures" / f"worst_failure.{suffix}").stat().st_size > 10_000

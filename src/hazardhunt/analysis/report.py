@@ -273,7 +273,11 @@ def _table_sections(
     sections: tuple[tuple[str, str, str, TableSource], ...],
 ) -> None:
     for title, intro, name, compute in sections:
-        report.table(report.section(title, intro), name, compute(results, report.tables))
+        section = report.section(title, intro)
+        table = compute(results, report.tables)
+        if table.empty:
+            section.parts.append("<p>The campaign has no runs this table compares.</p>")
+        report.table(section, name, table)
 
 
 def _class_discovery(report: _Report, results: Results) -> None:
