@@ -162,7 +162,7 @@ def rendered(
 def on_a_phone(
     chromium: str, report: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> dict[str, Any]:
-    """What headless Chromium rendered of the report in a phone-sized window."""
+    """What headless Chromium rendered of the report in a phone-sized frame."""
     return render(chromium, report, tmp_path_factory.mktemp("phone"), phone=True)
 
 
@@ -204,16 +204,18 @@ def test_every_image_loads(rendered: dict[str, Any]) -> None:
 
 
 def test_the_verdict_comes_first_with_the_campaigns_numbers(
-    rendered: dict[str, Any], report: Path
+    rendered: dict[str, Any], campaign: Path, report: Path
 ) -> None:
     """Right below the title, before any of the study's sections: the failures, the distinct
     mechanisms, the worst failure, which tester found what and the commands to keep them."""
     page = rendered["page"]
     assert page["afterTitle"] == "verdict"
     assert all(top > page["verdictTop"] for top in page["sectionTops"])
-    verdict = json.loads((report / "summary.json").read_text())["verdict"]
+    runs = [json.loads(path.read_text()) for path in campaign.glob("runs/*/summary.json")]
+    failures, episodes = sum(r["failures"] for r in runs), sum(r["episodes"] for r in runs)
     text = " ".join(page["verdict"].split())
-    assert f"{verdict['failures']} unsafe failures in {verdict['episodes']} episodes" in text
+    assert f"{failures} unsafe failures in {episodes} episodes of {len(runs)} runs" in text
+    verdict = json.loads((report / "summary.json").read_text())["verdict"]
     assert f"{len(verdict['classes'])} distinct mechanisms" in text
     assert all(name in text for name in verdict["classes"])
     assert f"{verdict['clusters']} clusters" in text
