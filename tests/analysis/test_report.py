@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -31,6 +32,7 @@ TABLES = (
     "representatives",
     "failure_rates",
     "runs",
+    "verdict_testers",
 )
 
 
@@ -115,6 +117,55 @@ def test_each_class_found_has_a_representative_that_replays(campaign, report):
         stem = "class_" + "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
         assert (report / "figures" / f"{stem}.png").is_file()
         assert (report / "figures" / f"{stem}.gif").is_file()
+
+
+def all_failures(campaign: Path) -> pd.DataFrame:
+    return pd.concat(
+        pd.read_parquet(run / "failures.parquet").assign(run_id=run.name)
+        for run in sorted((campaign / "runs").iterdir())
+    ).reset_index(drop=True)
+
+
+def test_the_verdict_counts_the_campaigns_failures_and_mechanisms(campaign, report):
+    verdict = json.loads((report / "summary.json").read_text())["verdict"]
+    failures = all_failures(campaign)
+    runs = run_summaries(campaign).values()
+    assert verdict["failures"] == sum(run["failures"] for run in runs) == len(failures) > 0
+    assert verdict["episodes"] == sum(run["episodes"] for run in runs)
+    assert verdict["classes"] == sorted(set(failures["class"]) - {"other"})
+    assert verdict["unclassified_failures"] == int((failures["class"] == "other").sum())
+    clusters = pd.read_csv(report / "tables" / "clusters.csv")
+    pooled = clusters[(clusters["tester"] == "all") & (clusters["scenario"] == "all")]
+    assert verdict["clusters"] == int(pooled["clusters"].iloc[0])
+
+
+def test_the_verdict_says_which_tester_found_what(campaign, report):
+    table = pd.read_csv(report / "tables" / "verdict_testers.csv", dtype=str).set_index("found")
+    failures = all_failures(campaign)
+    for tester in ("ppo-acc", "ppo-max", "random", "qd"):
+        own = failures[failures["run_id"].str.contains(f"__{tester}__")]
+        assert int(table.at["unsafe failures", tester]) == len(own)
+        assert int(table.at["classes found", tester]) == len(set(own["class"]) - {"other"})
+        for name in set(failures["class"]) - {"other"}:
+            first = own[own["class"] == name]["episode"]
+            expected = str(first.min()) if len(first) else "nan"
+            assert str(table.at[name, tester]) == expected
+
+
+def test_the_verdict_shows_the_failure_of_highest_risk_replayed(campaign, report):
+    failures = all_failures(campaign).set_index(["run_id", "episode"])
+    page = (report / "index.html").read_text()
+    verdict = page[page.index('<section id="verdict"') : page.index("</section>")]
+    shown = re.search(r'alt="Worst: ([^,]+), (\S+), episode (\d+)"', verdict)
+    assert shown, "no picture of the worst failure"
+    worst = failures.loc[(shown[2], int(shown[3]))]
+    assert worst["class"] == shown[1]
+    assert worst["max_risk"] == failures["max_risk"].max()
+    assert f"risk {worst['max_risk']:.0f}" in verdict
+    for suffix in ("png", "gif"):
+        assert (report / "figures" / f"worst_failure.{suffix}").stat().st_size > 10_000
+    assert f"hazardhunt export {campaign} --out {campaign / 'cases'}" in verdict
+    assert f"hazardhunt regress {campaign / 'cases'}" in verdict
 
 
 def test_the_page_has_every_section_with_its_figures_inlined(report):

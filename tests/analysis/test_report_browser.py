@@ -58,14 +58,48 @@ window.addEventListener("load", () => {
     height: image.naturalHeight,
     shown: shown(image),
   }));
+  const title = document.querySelector("h1");
+  const verdict = document.getElementById("verdict");
+  const headline = verdict ? verdict.querySelector(".headline") : null;
+  const page = {
+    afterTitle: title.nextElementSibling ? title.nextElementSibling.id : null,
+    verdict: verdict ? verdict.innerText : "",
+    verdictTop: verdict ? verdict.getBoundingClientRect().top : null,
+    headlineBottom: headline ? headline.getBoundingClientRect().bottom : null,
+    sectionTops: [...document.querySelectorAll("section")]
+      .filter((section) => section !== verdict)
+      .map((section) => section.getBoundingClientRect().top),
+    scrollWidth: document.documentElement.scrollWidth,
+    innerWidth: window.innerWidth,
+    innerHeight: window.innerHeight,
+  };
   const check = document.createElement("pre");
   check.id = "check";
-  check.textContent = JSON.stringify({ tables, images });
+  check.textContent = JSON.stringify({ tables, images, page });
   document.body.append(check);
+  if (window.parent !== window) window.parent.postMessage(check.textContent, "*");
 });
 </script>
 """
-"""Appended to a copy of the page: on load, writes what the browser rendered as JSON."""
+"""Appended to a copy of the page: on load, writes what the browser rendered as JSON (and
+hands it to the page that frames it, if any)."""
+
+PHONE = (390, 844)
+"""A phone's viewport in CSS pixels (width, height)."""
+
+FRAME = """<!DOCTYPE html><html><body style="margin: 0">
+<iframe src="index.html" width="{width}" height="{height}" style="border: 0"></iframe>
+<script>
+window.addEventListener("message", (event) => {{
+  const check = document.createElement("pre");
+  check.id = "check";
+  check.textContent = event.data;
+  document.body.append(check);
+}});
+</script></body></html>
+"""
+"""A page that shows the report in a frame of a phone's viewport: headless Chromium's window is
+never narrower than 500 pixels, a frame's viewport is as narrow as the frame."""
 
 
 @pytest.fixture(scope="session")
@@ -80,15 +114,15 @@ def chromium() -> str:
     return command
 
 
-@pytest.fixture(scope="module")
-def rendered(
-    chromium: str, report: Path, tmp_path_factory: pytest.TempPathFactory
-) -> dict[str, Any]:
-    """What headless Chromium rendered of the report: its tables and images."""
-    folder = tmp_path_factory.mktemp("browser")
-    page = folder / "index.html"
+def render(chromium: str, report: Path, folder: Path, phone: bool = False) -> dict[str, Any]:
+    """What headless Chromium rendered of the report, in a desktop window or, with ``phone``,
+    in a frame of a phone's size."""
     text = (report / "index.html").read_text()
-    page.write_text(text.replace("</body>", CHECK + "</body>"))
+    (folder / "index.html").write_text(text.replace("</body>", CHECK + "</body>"))
+    page = folder / "index.html"
+    if phone:
+        page = folder / "phone.html"
+        page.write_text(FRAME.format(width=PHONE[0], height=PHONE[1]))
     try:
         result = subprocess.run(
             [
@@ -97,6 +131,8 @@ def rendered(
                 "--no-sandbox",
                 "--disable-gpu",
                 "--disable-dev-shm-usage",
+                "--hide-scrollbars",
+                "--window-size=1280,900",
                 f"--user-data-dir={folder / 'profile'}",
                 "--virtual-time-budget=10000",
                 "--dump-dom",
@@ -112,6 +148,22 @@ def rendered(
     found = re.search(r'<pre id="check">(.*?)</pre>', result.stdout, re.DOTALL)
     assert found, f"the page's check did not run (exit {result.returncode}):\n{result.stderr}"
     return dict(json.loads(html.unescape(found.group(1))))
+
+
+@pytest.fixture(scope="module")
+def rendered(
+    chromium: str, report: Path, tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, Any]:
+    """What headless Chromium rendered of the report in a desktop window."""
+    return render(chromium, report, tmp_path_factory.mktemp("browser"))
+
+
+@pytest.fixture(scope="module")
+def on_a_phone(
+    chromium: str, report: Path, tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, Any]:
+    """What headless Chromium rendered of the report in a phone-sized frame."""
+    return render(chromium, report, tmp_path_factory.mktemp("phone"), phone=True)
 
 
 def test_report_makes_no_network_requests(report: Path) -> None:
@@ -149,3 +201,38 @@ def test_every_image_loads(rendered: dict[str, Any]) -> None:
     assert broken == []
     assert all(image["shown"] for image in images)
     assert all(image["alt"] for image in images), "every image has alternative text"
+
+
+def test_the_verdict_comes_first_with_the_campaigns_numbers(
+    rendered: dict[str, Any], campaign: Path, report: Path
+) -> None:
+    """Right below the title, before any of the study's sections: the failures, the distinct
+    mechanisms, the worst failure, which tester found what and the commands to keep them."""
+    page = rendered["page"]
+    assert page["afterTitle"] == "verdict"
+    assert all(top > page["verdictTop"] for top in page["sectionTops"])
+    runs = [json.loads(path.read_text()) for path in campaign.glob("runs/*/summary.json")]
+    failures, episodes = sum(r["failures"] for r in runs), sum(r["episodes"] for r in runs)
+    text = " ".join(page["verdict"].split())
+    assert f"{failures} unsafe failures in {episodes} episodes of {len(runs)} runs" in text
+    verdict = json.loads((report / "summary.json").read_text())["verdict"]
+    assert f"{len(verdict['classes'])} distinct mechanisms" in text
+    assert all(name in text for name in verdict["classes"])
+    assert f"{verdict['clusters']} clusters" in text
+    assert "The worst failure" in text
+    assert "Which tester found what" in text
+    assert rendered["tables"]["table-verdict_testers"]["shown"]
+    assert "hazardhunt export" in text
+    assert "hazardhunt regress" in text
+
+
+def test_on_a_phone_nothing_is_wider_than_the_screen(on_a_phone: dict[str, Any]) -> None:
+    """At a phone's width the page does not scroll sideways (wide tables scroll in their own
+    box, pictures shrink) and its first screen shows the verdict's numbers."""
+    page = on_a_phone["page"]
+    assert (page["innerWidth"], page["innerHeight"]) == PHONE
+    assert page["scrollWidth"] <= page["innerWidth"]
+    assert page["afterTitle"] == "verdict"
+    assert 0 <= page["verdictTop"] < page["headlineBottom"] <= page["innerHeight"]
+    assert all(top > page["headlineBottom"] for top in page["sectionTops"])
+    assert all(image["width"] > 0 and image["shown"] for image in on_a_phone["images"])

@@ -2,7 +2,9 @@
 
 Writes ``DIR/report/`` (into a hidden sibling first, renamed into place once complete)::
 
-    index.html       self-contained (images inlined): opens offline, can be mailed
+    index.html       self-contained (images inlined): opens offline, can be mailed; it opens
+                     with the verdict (failures, mechanisms, the worst failure, which tester
+                     found what, the commands that keep them as regression cases)
     summary.json     per run and per table, machine-readable
     tables/          every table as CSV and Markdown
     figures/         every figure as PNG, the representative failures also as GIF
@@ -27,7 +29,7 @@ from typing import Any
 import pandas as pd
 
 import hazardhunt
-from hazardhunt.analysis import diversity, figures, tables
+from hazardhunt.analysis import diversity, figures, tables, verdict
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.config import RunConfig
@@ -79,6 +81,9 @@ class _Report:
     directory: Path
     sections: list[_Section] = field(default_factory=list)
     tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+    opening: _Section | None = None
+    """What the page opens with, before the study's sections."""
+    findings: verdict.Verdict | None = None
 
     @property
     def figures(self) -> Path:
@@ -171,6 +176,8 @@ def _write_sections(report: _Report, results: Results, tell: Progress) -> None:
     tell("failure rates")
     _rates(report, results)
     _runs(report, results)
+    tell("verdict")
+    _verdict(report, results)
 
 
 def _put_in_place(written: Path, final: Path) -> None:
@@ -266,7 +273,11 @@ def _table_sections(
     sections: tuple[tuple[str, str, str, TableSource], ...],
 ) -> None:
     for title, intro, name, compute in sections:
-        report.table(report.section(title, intro), name, compute(results, report.tables))
+        section = report.section(title, intro)
+        table = compute(results, report.tables)
+        if table.empty:
+            section.parts.append("<p>The campaign has no runs this table compares.</p>")
+        report.table(section, name, table)
 
 
 def _class_discovery(report: _Report, results: Results) -> None:
@@ -454,19 +465,8 @@ def _representatives(report: _Report, results: Results) -> None:
     rows = []
     for _, row in chosen.iterrows():
         run_id, episode, name = str(row["run_id"]), int(row["episode"]), str(row["class"])
-        directory = results.run_directory(run_id)
-        stem = _file_name(f"class_{name}")
         title = f"{name}: {run_id}, episode {episode}"
-        config = load_run_config(directory)
-        if names_sut_plugins(config):
-            field = results.field_shape(str(row["field"]), str(row["scenario"]))
-            picture = _recorded_picture(
-                report.figures / f"{stem}.png", directory, config, field, row, title
-            )
-            report.image(section, picture, f"{title} (as recorded)")
-            replayed = "not replayed (plug-in SUT)"
-        else:
-            replayed = _replayed_pictures(report, section, directory, episode, name, title)
+        replayed = _failure_pictures(report, section, results, row, f"class_{name}", title)
         rows.append(
             {
                 "class": name,
@@ -482,13 +482,38 @@ def _representatives(report: _Report, results: Results) -> None:
     )
 
 
+def _failure_pictures(
+    report: _Report, section: _Section, results: Results, row: pd.Series, stem: str, title: str
+) -> str:
+    """Draw the failure ``row`` into ``section`` (files named after ``stem``): re-simulated
+    with its tracks and an animation of its last seconds, or, when the run's SUT is a plug-in
+    (which the report does not import), from its stored trajectory; whether it reproduced."""
+    run_id, episode = str(row["run_id"]), int(row["episode"])
+    directory = results.run_directory(run_id)
+    config = load_run_config(directory)
+    if names_sut_plugins(config):
+        field = results.field_shape(str(row["field"]), str(row["scenario"]))
+        picture = _recorded_picture(
+            report.figures / f"{_file_name(stem)}.png", directory, config, field, row, title
+        )
+        report.image(section, picture, f"{title} (as recorded)")
+        return "not replayed (plug-in SUT)"
+    return _replayed_pictures(report, section, directory, episode, str(row["class"]), stem, title)
+
+
 def _replayed_pictures(
-    report: _Report, section: _Section, directory: Path, episode: int, name: str, title: str
+    report: _Report,
+    section: _Section,
+    directory: Path,
+    episode: int,
+    name: str,
+    stem: str,
+    title: str,
 ) -> str:
     """Re-simulate a failure of a run with the built-in SUT, draw it and its last seconds;
     whether it reproduced."""
     replay = replay_failure(directory, episode)
-    stem = _file_name(f"class_{name}")
+    stem = _file_name(stem)
     simulation = replay.simulation
     picture = plot_episode(
         report.figures / f"{stem}.png",
@@ -551,6 +576,98 @@ def _runs(report: _Report, results: Results) -> None:
         )
 
 
+def _verdict(report: _Report, results: Results) -> None:
+    """The page's first section: what the campaign found, the worst failure, which tester found
+    what and how to keep the failures as regression cases."""
+    findings = verdict.verdict(results, report.tables.get("clusters"))
+    report.findings = findings
+    section = _Section("Verdict")
+    report.opening = section
+    section.parts.append(f'<p class="headline">{_headline(findings)}</p>')
+    worst = verdict.worst_failure(results.failures)
+    if worst is not None:
+        section.parts.append("<h3>The worst failure</h3>")
+        section.parts.append(
+            f"<p>{_worst_facts(worst)} Worst means {html.escape(verdict.WORST_RULE)}.</p>"
+        )
+        title = f"Worst: {worst['class']}, {worst['run_id']}, episode {int(worst['episode'])}"
+        _failure_pictures(report, section, results, worst, "worst_failure", title)
+    section.parts.append("<h3>Which tester found what</h3>")
+    report.table(
+        section,
+        "verdict_testers",
+        verdict.testers_found(results),
+        "Per tester: its unsafe failures, the distinct classes it found, and the episode (its "
+        "index in the run, the earliest over cases and seeds) of its first failure and of the "
+        "first failure of each class; blank: never.",
+    )
+    if findings.failures:
+        _regression_commands(section, results)
+    _incomplete_runs(section, results)
+
+
+def _headline(findings: verdict.Verdict) -> str:
+    """The verdict in one sentence or two, numbers in bold."""
+    played = f"in {findings.episodes} episodes of {findings.runs} run{_s(findings.runs)}"
+    if not findings.failures:
+        return (
+            f"<strong>No unsafe failure</strong> {played}: the failure rate is below "
+            f"{findings.rate_bound:.2g} per episode (95 % confidence, Clopper-Pearson)."
+        )
+    classes = len(findings.classes)
+    text = (
+        f"<strong>{findings.failures} unsafe failure{_s(findings.failures)}</strong> {played}, "
+        f"<strong>{classes} distinct mechanism{_s(classes)}</strong> (failure classes"
+        f"{': ' + html.escape(', '.join(findings.classes)) if classes else ''})"
+    )
+    if findings.unclassified:
+        text += f"; {findings.unclassified} failure{_s(findings.unclassified)} fit no class"
+    if findings.clusters is not None:
+        text += (
+            f"; their trajectories form <strong>{findings.clusters} "
+            f"cluster{_s(findings.clusters)}</strong>"
+        )
+    return text + "."
+
+
+def _worst_facts(worst: pd.Series) -> str:
+    field = "no protective field" if worst["field"] == "none" else f"the {worst['field']} field"
+    return html.escape(
+        f"{worst['class']} in {worst['scenario']} with {field}, found by {worst['tester']} "
+        f"(seed {int(worst['seed'])}, episode {int(worst['episode'])}): the human touched the "
+        f"robot's {worst['contact_face']} face at {float(worst['sim_time']):.1f} s, risk "
+        f"{float(worst['max_risk']):.0f}."
+    )
+
+
+def _regression_commands(section: _Section, results: Results) -> None:
+    plugins = any(
+        names_sut_plugins(load_run_config(Path(directory)))
+        for directory in results.runs["directory"]
+    )
+    commands = verdict.regression_commands(results.directory, plugins)
+    section.parts.append("<h3>Keep them as regression cases</h3>")
+    section.parts.append(
+        f'<pre class="commands"><code>{html.escape(chr(10).join(commands))}</code></pre>'
+        "<p>export writes one case file per class, scenario and field (--all: one per failure; "
+        "--pytest: also a pytest module); regress re-runs every case against the system under "
+        "test and exits with 1 while any still fails, so that it can gate a CI job.</p>"
+    )
+
+
+def _incomplete_runs(section: _Section, results: Results) -> None:
+    left_out = len(results.unfinished) + len(results.damaged)
+    if left_out:
+        section.parts.append(
+            f'<p class="warning">{left_out} run{_s(left_out)} of the campaign '
+            f"{'is' if left_out == 1 else 'are'} unfinished or damaged and left out (see Runs).</p>"
+        )
+
+
+def _s(count: int) -> str:
+    return "" if count == 1 else "s"
+
+
 # ------------------------------------------------------------------ outputs
 def _summary(results: Results, report: _Report) -> dict[str, Any]:
     def records(table: pd.DataFrame) -> list[dict[str, Any]]:
@@ -571,19 +688,40 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
             }
             for _, row in lesson.iterrows()
         },
+        "verdict": _verdict_summary(report),
         "tables": {name: records(table) for name, table in report.tables.items()},
     }
 
 
+def _verdict_summary(report: _Report) -> dict[str, Any] | None:
+    findings = report.findings
+    if findings is None:
+        return None
+    return {
+        "failures": findings.failures,
+        "episodes": findings.episodes,
+        "classes": list(findings.classes),
+        "unclassified_failures": findings.unclassified,
+        "clusters": findings.clusters,
+        "failure_rate_upper_bound": findings.rate_bound,
+    }
+
+
 _STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
+* { box-sizing: border-box; }
+body { font-family: system-ui, sans-serif; margin: 1em auto; padding: 0 1em; max-width: 1200px;
+  color: #222; overflow-wrap: anywhere; }
 h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; overflow-wrap: normal; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
 th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
-figure { margin: 1em 1em 1em 0; display: inline-block; vertical-align: top; }
-figure.table { display: block; } img { max-width: 100%; }
+figure { margin: 1em 1em 1em 0; display: inline-block; vertical-align: top; max-width: 100%; }
+figure.table { display: block; overflow-x: auto; } img { max-width: 100%; height: auto; }
 figcaption { font-size: 0.85em; color: #555; }
+pre { overflow-x: auto; background: #f6f6f6; padding: 0.5em; }
+.verdict { border: 2px solid #444; border-radius: 6px; padding: 0 1em 0.5em; }
+.verdict h2 { margin-top: 0.5em; } .headline { font-size: 1.15em; }
+.verdict img { width: 420px; }
 .warning { color: #b00; }
 """
 
@@ -607,10 +745,21 @@ def _page(results: Results, report: _Report) -> str:
     )
     return (
         '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>hazardhunt report: {html.escape(results.directory.name)}</title>"
         f"<style>{_STYLE}</style></head><body>"
         f"<h1>hazardhunt report: {html.escape(str(results.directory))}</h1>"
+        f"{_verdict_html(report)}"
         f"<p>{html.escape(facts)}</p><ol>{contents}</ol>{body}</body></html>"
+    )
+
+
+def _verdict_html(report: _Report) -> str:
+    if report.opening is None:
+        return ""
+    return (
+        f'<section id="verdict" class="verdict"><h2>{html.escape(report.opening.title)}</h2>'
+        f"{''.join(report.opening.parts)}</section>"
     )
 
 
