@@ -38,15 +38,26 @@ AGENT_PORTS = (
 """Ports each node would otherwise take at fixed defaults (two nodes on one machine collide)."""
 
 
+def free_ports(count: int) -> list[int]:
+    """``count`` distinct free ports (every probe stays bound until all are chosen, so the
+    system cannot hand out one port twice)."""
+    with contextlib.ExitStack() as stack:
+        probes = [stack.enter_context(socket.socket()) for _ in range(count)]
+        for probe in probes:
+            probe.bind(("", 0))
+        return [int(probe.getsockname()[1]) for probe in probes]
+
+
 def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("", 0))
-        return int(probe.getsockname()[1])
+    return free_ports(1)[0]
 
 
 def start_node(temp_dir: Path, *options: str) -> subprocess.Popen[bytes]:
     """A Ray node with one CPU, running until its process ends; returns once the node is up."""
-    ports = [value for option in AGENT_PORTS for value in (option, str(free_port()))]
+    taken = set(options)  # the head's --port is chosen before
+    chosen = [port for port in free_ports(2 * len(AGENT_PORTS)) if str(port) not in taken]
+    pairs = zip(AGENT_PORTS, chosen[: len(AGENT_PORTS)], strict=True)
+    ports = [value for option, port in pairs for value in (option, str(port))]
     command = [str(RAY), "start", "--block", "--num-cpus", "1", "--temp-dir", str(temp_dir)]
     with (temp_dir.parent / f"{temp_dir.name}.log").open("wb") as log:
         process = subprocess.Popen(
