@@ -5,18 +5,17 @@ import pytest
 
 from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.geometry import distances_to_segments
-from hazardhunt.world.kinematics import step_human, step_robot
+from hazardhunt.world.kinematics import move_human, step_robot
 from hazardhunt.world.scenario import load_scenario
 
 FLOOR = load_scenario("crossing").floor
 
 
 def walk(position, heading, speed, turn_rate, seconds):
-    position = np.array(position, dtype=float)
+    x, y = position
     for _ in range(round(seconds / 0.05)):
-        motion = step_human(position, heading, speed, turn_rate, 0.05, FLOOR, 0.25)
-        position, heading = motion.position, motion.heading
-    return position, heading
+        x, y, heading, *_ = move_human(x, y, heading, speed, turn_rate, 0.05, FLOOR, 0.25)
+    return np.array([x, y]), heading
 
 
 def test_human_walks_straight_in_free_space():

@@ -3,28 +3,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
 from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.floor import FloorMap
-from hazardhunt.world.geometry import FloatArray
-
-
-@dataclass(frozen=True)
-class HumanMotion:
-    """The human after one physics step."""
-
-    position: FloatArray
-    """m"""
-    heading: float
-    """rad"""
-    velocity: FloatArray
-    """Actual velocity over the step (zero when blocked), in m/s."""
-    blocked: bool
-    """True when an obstacle shortened the step."""
 
 
 class HumanStep(NamedTuple):
@@ -44,31 +28,6 @@ class HumanStep(NamedTuple):
     """True when an obstacle shortened the step."""
 
 
-def step_human(
-    position: FloatArray,
-    heading: float,
-    speed: float,
-    turn_rate: float,
-    dt: float,
-    floor: FloorMap,
-    radius: float,
-) -> HumanMotion:
-    """Move the human disc for ``dt`` seconds; walls and shelves block it.
-
-    At contact the human slides along the obstacle (the part of the step that points into it is
-    removed); where sliding is blocked too (a corner), it stops. It never passes through.
-    """
-    moved = move_human(
-        float(position[0]), float(position[1]), heading, speed, turn_rate, dt, floor, radius
-    )
-    return HumanMotion(
-        np.array([moved.x, moved.y]),
-        moved.heading,
-        np.array([moved.velocity_x, moved.velocity_y]),
-        moved.blocked,
-    )
-
-
 def move_human(
     x: float,
     y: float,
@@ -79,8 +38,12 @@ def move_human(
     floor: FloorMap,
     radius: float,
 ) -> HumanStep:
-    """:func:`step_human` for a human at (x, y), on floats: no arrays unless an obstacle
-    blocks the step."""
+    """Move the human disc at (x, y) for ``dt`` seconds; walls and shelves block it.
+
+    At contact the human slides along the obstacle (the part of the step that points into it is
+    removed); where sliding is blocked too (a corner), it stops. It never passes through. On
+    floats: no arrays unless an obstacle blocks the step.
+    """
     new_heading = heading + turn_rate * dt
     mid_heading = heading + 0.5 * turn_rate * dt
     distance = speed * dt
