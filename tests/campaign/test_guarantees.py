@@ -15,6 +15,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -121,6 +122,19 @@ def ledger(out: Path) -> dict[str, dict[str, object]]:
     return {entry["run_id"]: entry for entry in summary["runs"]}
 
 
+def run_beside_random(file: Path, out: Path, tester: str) -> tuple[Any, dict[str, Any]]:
+    """Run a campaign of ``random`` beside a ``tester`` whose run fails: the campaign exits 1
+    without a traceback, random's run is complete; the result and the failed run's entry."""
+    result = hazardhunt("campaign", file, "--out", out, "--workers", "2")
+    assert result.returncode == 1
+    assert "Traceback" not in result.stdout + result.stderr
+    entries = ledger(out)
+    assert entries["head-on__2m__random__seed0"]["status"] == "complete"
+    failed = entries[f"head-on__2m__{tester}__seed0"]
+    assert failed["status"] == "failed"
+    return result, failed
+
+
 def leftovers(directory: Path) -> list[str]:
     """Hidden partial directories under ``directory``."""
     return sorted(p.name for p in directory.rglob("*.partial"))
@@ -210,13 +224,7 @@ def test_a_run_whose_worker_always_dies_is_recorded_as_failed_and_the_others_com
         },
     )
     out = tmp_path / "campaign"
-    result = hazardhunt("campaign", file, "--out", out, "--workers", "2")
-    assert result.returncode == 1
-    assert "Traceback" not in result.stdout + result.stderr
-    entries = ledger(out)
-    assert entries["head-on__2m__random__seed0"]["status"] == "complete"
-    failed = entries["head-on__2m__dying__seed0"]
-    assert failed["status"] == "failed"
+    result, failed = run_beside_random(file, out, "dying")
     assert "WorkerDied" in str(failed["error"])
     assert "killed by SIGKILL, on each of 3 attempts" in str(failed["error"])
     assert "head-on__2m__dying__seed0" in result.stdout
@@ -311,13 +319,7 @@ def test_a_campaign_records_a_run_that_could_not_write_its_results(
 ) -> None:
     file = campaign_file(plugins, {"random": "", "full": 'path = "misbehaving:FillingTheDisk"'})
     out = tmp_path / "campaign"
-    result = hazardhunt("campaign", file, "--out", out, "--workers", "2")
-    assert result.returncode == 1
-    assert "Traceback" not in result.stdout + result.stderr
-    entries = ledger(out)
-    assert entries["head-on__2m__random__seed0"]["status"] == "complete"
-    failed = entries["head-on__2m__full__seed0"]
-    assert failed["status"] == "failed"
+    _, failed = run_beside_random(file, out, "full")
     assert "No space left on device" in str(failed["error"])
     assert not leftovers(out)
     assert not (out / "runs" / "head-on__2m__full__seed0").exists()
