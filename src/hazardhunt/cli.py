@@ -135,8 +135,8 @@ ControllerParamOption = Annotated[
 ControllerTimeoutOption = Annotated[
     float | None,
     typer.Option(
-        help="Wall-clock limit on each call of the controller, in s; a call that exceeds it ends "
-        "the episode as sut_error (default: no limit)."
+        help="Wall-clock limit on each call of the controller and of the safety layer, in s; a "
+        "call that exceeds it ends the episode as sut_error (default: no limit)."
     ),
 ]
 SafetyLayerOption = Annotated[

@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 from PIL import Image
 
+from hazardhunt.analysis import report as report_module
 from hazardhunt.analysis.results import ResultsError, load_results
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
@@ -259,3 +260,13 @@ def test_the_report_is_readable_as_the_umask_allows(report):
     os.umask(mask)
     for name in ("index.html", "summary.json"):
         assert (report / name).stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_a_table_the_campaign_cannot_fill_says_which_testers_it_needs(campaign, tmp_path):
+    copy = tmp_path / "campaign"
+    shutil.copytree(campaign, copy, ignore=shutil.ignore_patterns("report", "*ppo-acc*"))
+    page = report_module._Report(tmp_path / "report")
+    report_module._table_sections(page, load_results(copy), report_module.TABLE_SECTIONS)
+    said = {section.title: " ".join(section.parts) for section in page.sections}
+    runtime = said["Runtime: accumulated vs maximum reward (Table II)"]
+    assert "It needs ppo-acc and ppo-max on the same (scenario, field)" in runtime

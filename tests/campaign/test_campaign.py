@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 
 from hazardhunt.campaign import config as config_module
+from hazardhunt.campaign.campaign import shown_scenario
 from hazardhunt.campaign.config import load_campaign
 from hazardhunt.world.scenario import Scenario, load_scenario
 from tests.helpers import hazardhunt, run_tables
@@ -483,6 +484,9 @@ def test_a_field_named_like_a_path_stays_inside_the_campaign_and_exports(tmp_pat
     out = home / "campaign"
     result = hazardhunt("campaign", file, "--out", out)
     assert result.returncode == 0, result.stderr
+    # the table names the scenario file as the user wrote it, not by its absolute path
+    assert "│ mine.toml " in result.stdout
+    assert str(home / "mine.toml") not in result.stdout
     [run] = (out / "runs").iterdir()
     assert run.name == "mine__x_.._.._.._.._ESCAPED__random__seed0"
     assert [p for p in tmp_path.rglob("*ESCAPED*") if out not in p.parents] == []
@@ -526,3 +530,13 @@ def test_a_campaign_loads_each_scenario_file_once(
     runs = load_campaign(file).runs()
     assert len(runs) == 24
     assert sorted(loads) == ["one.toml", "two.toml"]
+
+
+def test_the_table_shows_a_scenario_file_relative_to_where_the_user_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "floors").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert shown_scenario(str(tmp_path / "floors" / "mine.toml")) == "floors/mine.toml"
+    assert shown_scenario("/elsewhere/theirs.toml") == "theirs.toml"
+    assert shown_scenario("crossing") == "crossing"

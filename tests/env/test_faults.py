@@ -276,6 +276,31 @@ def test_a_controller_that_hangs_past_the_time_limit_ends_the_episode_as_sut_err
     assert signal.getsignal(signal.SIGALRM) is handler
 
 
+class HangingSafetyLayer(FaultySafetyLayer):
+    """A safety layer that, in its first episode only, hangs in ``update`` from 1 s on."""
+
+    def __init__(self):
+        super().__init__(returned=None)
+
+    def update(self, time, robot, human_position, radius):
+        if self.resets == 1 and time >= 1.0:
+            hang()
+        return SafetyStatus(emergency_stop=False, human_in_field=False)
+
+
+def test_a_safety_layer_that_hangs_past_the_time_limit_ends_the_episode_as_sut_error():
+    first, second, sound = first_and_second_episode(
+        safety_layer=HangingSafetyLayer(), controller_timeout=0.2
+    )
+    assert first.outcome == "sut_error"
+    assert first.summary.sim_time == pytest.approx(1.05)
+    assert first.summary.safety_layer_errors == (
+        "TimeLimitError: update() took longer than its time limit of 0.2 s",
+    )
+    assert second.summary == sound.summary
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
 def test_outside_the_main_thread_the_time_limit_gives_way_with_a_warning():
     calls = []
 

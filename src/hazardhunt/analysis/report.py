@@ -266,6 +266,15 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
 """Sections that are one table each: title, explanation, table name, how to compute it (from
 the results and the tables before it, by name)."""
 
+EMPTY_TABLE_NEEDS = {
+    "lesson_2": f" It needs {STUDY_BASELINE} and another tester on the same (scenario, field).",
+    "lesson_1": f" It needs {STUDY_BASELINE} and another tester with the same (scenario, field, "
+    "seed).",
+    "runtime": f" It needs {STUDY_REWARDS[0]} and {STUDY_REWARDS[1]} on the same (scenario, "
+    f"field): add the missing one to the campaign's testers.",
+}
+"""What a table that came out empty needs, by table name, said below it."""
+
 
 def _table_sections(
     report: _Report,
@@ -276,7 +285,10 @@ def _table_sections(
         section = report.section(title, intro)
         table = compute(results, report.tables)
         if table.empty:
-            section.parts.append("<p>The campaign has no runs this table compares.</p>")
+            needs = EMPTY_TABLE_NEEDS.get(name, "")
+            section.parts.append(
+                f"<p>The campaign has no runs this table compares.{html.escape(needs)}</p>"
+            )
         report.table(section, name, table)
 
 

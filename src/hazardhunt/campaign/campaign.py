@@ -765,6 +765,17 @@ def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
 # --- report ------------------------------------------------------------------------------------
 
 
+def shown_scenario(scenario: str) -> str:
+    """A scenario as the campaign's table shows it: a built-in by its name, a file by its path
+    relative to the working directory when it lies below it, or else by its file name."""
+    if not scenario.endswith(".toml"):
+        return scenario
+    path = Path(scenario)
+    with contextlib.suppress(ValueError):
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    return path.name
+
+
 def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
     """Per scenario x field x tester: failures of the run, or over seeds their mean ± std, and
     the mean wall time."""
@@ -778,9 +789,9 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
         failures = [int(e["failures"]) for e in complete]
         wall_times = [float(e["wall_time_s"]) for e in complete]
         table.add_row(
-            scenario,
-            field,
-            tester,
+            escape(shown_scenario(scenario)),
+            escape(field),
+            escape(tester),
             f"{len(complete)}/{len(entries)}",
             _mean_std(failures),
             f"{statistics.fmean(wall_times):.1f}" if wall_times else "-",

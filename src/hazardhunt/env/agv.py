@@ -98,8 +98,9 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             termination: Episode duration and stall limit.
             max_failed_commands: Consecutive failed controller commands that end the episode
                 as ``sut_error``.
-            controller_timeout: Wall-clock limit on each call of the controller, in s; a call
-                that exceeds it ends the episode as ``sut_error``. None: no limit.
+            controller_timeout: Wall-clock limit on each call of the controller and of the
+                safety layer, in s; a call that exceeds it ends the episode as ``sut_error``.
+                None: no limit.
             robot: Robot parameters.
             human: Human parameters.
             risk_params: Constants of the risk metric.

@@ -142,9 +142,9 @@ class Simulation:
             termination: Episode duration and stall limit.
             max_failed_commands: Consecutive failed controller commands that end the episode
                 as ``sut_error``.
-            controller_timeout: Wall-clock limit on each call of the controller, in s (see
-                :class:`~hazardhunt.sut.guard.TimeLimit`); a call that exceeds it ends the
-                episode as ``sut_error``. None: no limit.
+            controller_timeout: Wall-clock limit on each call of the controller and of the
+                safety layer, in s (see :class:`~hazardhunt.sut.guard.TimeLimit`); a call
+                that exceeds it ends the episode as ``sut_error``. None: no limit.
             robot: Robot parameters (the controller receives them in ``reset``).
             human: Human parameters.
             risk_params: Constants of the risk metric.
@@ -268,7 +268,7 @@ class Simulation:
         ``sut_error``."""
         counts = self._counts
         try:
-            self.safety_layer.reset()
+            self._time_limit.call("the safety layer's reset()", self.safety_layer.reset)
         except Exception as error:
             counts.safety_layer_errors.append(f"reset() raised {_named(error)}")
             self._sut_error = True
@@ -408,8 +408,13 @@ class Simulation:
         else than a SafetyStatus, the episode ends as ``sut_error`` with the state unchanged."""
         try:
             status = checked_status(
-                self.safety_layer.update(
-                    now, self.robot, self.human_position, self.human_params.radius
+                self._time_limit.call(
+                    "update()",
+                    self.safety_layer.update,
+                    now,
+                    self.robot,
+                    self.human_position,
+                    self.human_params.radius,
                 )
             )
         except Exception as error:

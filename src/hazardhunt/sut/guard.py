@@ -214,7 +214,7 @@ class TimeLimit:
         if not self._warned:
             warnings.warn(
                 "controller_timeout works only in a process's main thread on a platform with "
-                "SIGALRM; the controller runs here without a time limit",
+                "SIGALRM; the controller and the safety layer run here without a time limit",
                 RuntimeWarning,
                 stacklevel=3,
             )
