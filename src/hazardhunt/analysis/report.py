@@ -16,6 +16,7 @@ or safety layer is a plug-in are drawn from their stored trajectories instead of
 from __future__ import annotations
 
 import base64
+import fcntl
 import html
 import json
 import os
@@ -181,11 +182,14 @@ def _write_sections(report: _Report, results: Results, tell: Progress) -> None:
 
 
 def _put_in_place(written: Path, final: Path) -> None:
-    """Replace the report ``final`` (if any) by the complete one ``written``."""
-    previous = final.with_name(f".report-{os.getpid()}.previous")
-    if final.exists():
-        final.rename(previous)
-    written.rename(final)
+    """Replace the report ``final`` (if any) by the complete one ``written``. Two reports of
+    one directory finishing at once take turns (a lock beside ``final``): the last one stays."""
+    previous = written.with_suffix(".previous")
+    with open(final.with_name(".report.lock"), "a") as lock:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX)
+        if final.exists():
+            final.rename(previous)
+        written.rename(final)
     shutil.rmtree(previous, ignore_errors=True)
 
 
