@@ -372,6 +372,14 @@ def campaign(
     ] = None,
     classifier: RunClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
+    runs: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Run only the runs whose id matches this shell pattern (e.g. "
+            "'crossing__*__seed0'; repeatable) and leave the others for later: a large "
+            "campaign in slices, into one directory."
+        ),
+    ] = None,
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign.
 
@@ -390,7 +398,13 @@ def campaign(
     check_output_location(out)
     try:
         run_campaign(
-            config, out, workers=workers, executor=executor, address=address, console=console
+            config,
+            out,
+            workers=workers,
+            executor=executor,
+            address=address,
+            console=console,
+            only=runs or (),
         )
     except CampaignFailed:
         raise typer.Exit(1) from None

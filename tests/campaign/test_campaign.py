@@ -91,6 +91,37 @@ def test_two_workers_record_the_same_episodes_as_one(
     assert str(out.resolve()) in result.stdout
 
 
+def test_a_campaign_run_in_slices_ends_as_the_whole_campaign_run_at_once(
+    campaign_file: Path, reference: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "campaign"
+    first = hazardhunt("campaign", campaign_file, "--out", out, "--runs", "overtaking__*__seed0")
+    assert first.returncode == 0, first.stderr
+    assert "3 runs not run yet" in first.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["runs_complete"], summary["runs_pending"]) == (1, 3)
+    assert_same_runs(out, reference, ["overtaking__2m__random__seed0"])
+    rest = hazardhunt(
+        "campaign", campaign_file, "--out", out, "--runs", "*seed1", "--runs", "head-on*"
+    )
+    assert rest.returncode == 0, rest.stderr
+    assert "not run yet" not in rest.stdout
+    assert_same_runs(out, reference)
+
+
+def test_a_slice_that_matches_no_run_is_one_line_and_writes_nothing(
+    campaign_file: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "campaign"
+    result = hazardhunt("campaign", campaign_file, "--out", out, "--runs", "crossing*")
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        "error: --runs: 'crossing*' matches no run of the campaign; its run ids look like "
+        "'head-on__2m__random__seed0' (scenario__field__tester__seedN)"
+    )
+    assert not out.exists()
+
+
 def live_processes_in_group(group: int) -> list[int]:
     """Processes of a process group that still run (zombies are dead, merely unreaped)."""
     alive = []

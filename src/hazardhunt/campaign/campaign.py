@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import fnmatch
 import io
 import json
 import logging
@@ -34,7 +35,7 @@ import tempfile
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from multiprocessing.connection import Connection
@@ -123,6 +124,7 @@ def run_campaign(
     executor: str = "local",
     address: str | None = None,
     console: Console | None = None,
+    only: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Execute every run of ``config`` into the campaign directory ``out``, or finish it.
 
@@ -137,6 +139,9 @@ def run_campaign(
         address: Address of an existing Ray cluster to run on (``ray`` only); its nodes need
             hazardhunt installed, but no file system shared with this machine.
         console: Where progress and the final table are printed; nothing is printed if None.
+        only: Shell-style patterns of run ids (``crossing__*__seed0``): execute only the runs
+            that match one of them now and leave the others pending, to run a large campaign
+            in slices into one directory. Empty: every run.
 
     Returns:
         The campaign summary, as written to ``out/summary.json``.
@@ -152,6 +157,7 @@ def run_campaign(
     if workers < 1:
         raise ValueError(f"workers must be at least 1, not {workers}")
     runs = config.runs()
+    selected = selected_runs(runs, only)
     _check_directory(config, out)
     out.mkdir(parents=True, exist_ok=True)
     with exclusive_lock(out / ".lock", out, "campaign"):
@@ -165,7 +171,7 @@ def run_campaign(
         ledger = _Ledger(config, runs, out)
         _redo_damaged(ledger, runs_directory, console)
         _warn_of_other_versions(ledger, console)
-        pending = [run for run in runs if ledger.status(run) != "complete"]
+        pending = [run for run in selected if ledger.status(run) != "complete"]
         if pending:
             _execute(pending, runs_directory, ledger, workers, executor, address, console)
         summary = ledger.write()
@@ -182,6 +188,23 @@ def run_campaign(
     if summary["runs_failed"]:
         raise CampaignFailed(summary)
     return summary
+
+
+def selected_runs(runs: list[RunConfig], only: Sequence[str]) -> list[RunConfig]:
+    """The runs whose ids match one of the shell-style patterns ``only`` (all if empty).
+
+    Raises:
+        ConfigError: A pattern matches no run; the message shows what run ids look like.
+    """
+    if not only:
+        return runs
+    for pattern in only:
+        if not any(fnmatch.fnmatchcase(run.run_id, pattern) for run in runs):
+            raise ConfigError(
+                f"--runs: {pattern!r} matches no run of the campaign; its run ids look like "
+                f"{runs[0].run_id!r} (scenario__field__tester__seedN)"
+            )
+    return [run for run in runs if any(fnmatch.fnmatchcase(run.run_id, p) for p in only)]
 
 
 def _redo_damaged(ledger: _Ledger, runs_directory: Path, console: Console | None) -> None:
@@ -809,6 +832,11 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
         console.print(
             f"[red]runs that raised: {summary['runs_failed']}[/red] (errors in summary.json); "
             "run the same command again to retry them"
+        )
+    if summary["runs_pending"]:
+        console.print(
+            f"{summary['runs_pending']} runs not run yet: run the campaign again (with other "
+            "--runs patterns, or without) to run them"
         )
 
 
