@@ -480,6 +480,34 @@ def export(
         console.print(f"pytest module written to [bold]{module}[/bold]")
 
 
+@app.command()
+def copy(
+    directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
+    out: Annotated[
+        Path, typer.Option(help="Where the copy goes (created, or brought up to date).")
+    ],
+) -> None:
+    """Copy results without the failures' trajectories: small enough to keep in version control.
+
+    The copy holds every table, summary and configuration and the testers' state; report and
+    export work on it (failures of the built-in SUT replay from their actions; the clusters of
+    trajectories and --reclassify need the original). Only finished
+    runs whose files match their checksums are copied; copying a campaign again adds the runs
+    finished since.
+    """
+    from hazardhunt.campaign.copying import copy_results
+
+    copied = copy_results(directory, out)
+    for run_id, damage in copied.damaged.items():
+        console.print(
+            f"[yellow]warning:[/yellow] {escape(run_id)} not copied: damaged ({escape(damage)})"
+        )
+    console.print(
+        f"{len(copied.copied)} run(s) copied, {len(copied.already_there)} already there, "
+        f"{len(copied.unfinished)} not finished yet; the copy is [bold]{out.resolve()}[/bold]"
+    )
+
+
 def _warn_of_damaged_runs(directory: Path) -> None:
     """Name the runs of a campaign directory left out because their files are damaged."""
     from hazardhunt.analysis.results import ResultsError, damaged_runs

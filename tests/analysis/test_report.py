@@ -270,3 +270,18 @@ def test_a_table_the_campaign_cannot_fill_says_which_testers_it_needs(campaign, 
     said = {section.title: " ".join(section.parts) for section in page.sections}
     runtime = said["Runtime: accumulated vs maximum reward (Table II)"]
     assert "It needs ppo-acc and ppo-max on the same (scenario, field)" in runtime
+
+
+def test_a_copy_without_trajectories_reports_the_same_failures_and_replays_them(
+    campaign, report, tmp_path
+):
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", copy).returncode == 0
+    assert not list(copy.rglob("trajectories"))
+    result = hazardhunt("report", copy)
+    assert result.returncode == 0, result.stderr
+    for table in ("failures_per_run", "classes", "representatives"):
+        pd.testing.assert_frame_equal(
+            pd.read_csv(copy / "report" / "tables" / f"{table}.csv"),
+            pd.read_csv(report / "tables" / f"{table}.csv"),
+        )

@@ -40,7 +40,12 @@ from hazardhunt.campaign.replay import (
     replay_actions,
     replay_failure,
 )
-from hazardhunt.campaign.store import read_trajectory, write_bytes_atomic, write_json_atomic
+from hazardhunt.campaign.store import (
+    left_out,
+    read_trajectory,
+    write_bytes_atomic,
+    write_json_atomic,
+)
 from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
@@ -359,7 +364,8 @@ def _clusters(report: _Report, results: Results) -> None:
     if features.empty:
         recorded = not results.failures.empty
         section.parts.append(
-            "<p>No failure's trajectory is stored.</p>"
+            "<p>No failure's trajectory is stored (a copy made by <code>hazardhunt copy</code> "
+            "leaves them out): the clusters need them.</p>"
             if recorded
             else "<p>No failure was recorded.</p>"
         )
@@ -508,6 +514,8 @@ def _failure_pictures(
     directory = results.run_directory(run_id)
     config = load_run_config(directory)
     if names_sut_plugins(config):
+        if "trajectories" in left_out(directory):
+            return "not replayed (plug-in SUT) nor drawn (a copy without trajectories)"
         field = results.field_shape(str(row["field"]), str(row["scenario"]))
         picture = _recorded_picture(
             report.figures / f"{_file_name(stem)}.png", directory, config, field, row, title

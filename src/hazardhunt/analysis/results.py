@@ -14,7 +14,7 @@ from pydantic import ValidationError
 from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.store import find_damage
+from hazardhunt.campaign.store import find_damage, left_out
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
@@ -130,6 +130,11 @@ def _reclassified(
     directories = runs.set_index("run_id")["directory"]
     for run_id, group in failures.groupby("run_id", sort=False):
         directory = Path(directories[run_id])
+        if "trajectories" in left_out(directory):
+            raise ResultsError(
+                f"{directory}: a copy without the failures' trajectories, which classifying "
+                "anew needs; use the original results"
+            )
         stored = pd.read_parquet(directory / "trajectories")
         trajectories = {
             int(episode): [TrajectorySample.from_row(row) for row in samples.to_dict("records")]

@@ -11,6 +11,9 @@ Layout of a run directory::
     tester/              what the tester learned (the PPO model)
     summary.json         written last: its presence marks the run finished; it holds the
                          SHA-256 of every other file, so that a damaged run is told apart
+
+A copy made by :func:`copy_results` may leave the trajectories out: its ``summary.json`` then
+lists ``trajectories`` under ``left_out``, and their absence is not damage.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -46,6 +50,12 @@ FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_fac
 
 LOITERING_COLUMNS = ("outcome", "sim_time", "decision_steps", "emergency_stops", "time_in_field")
 """Columns of ``loitering.parquet`` taken from the episode summary (besides the replay keys)."""
+
+LEFT_OUT_KEY = "left_out"
+"""The key of a run's ``summary.json`` that lists the folders a copy left out."""
+
+LEAVABLE = ("trajectories",)
+"""The folders of a run a copy may leave out (the report and export work without them)."""
 
 TRAJECTORY_FLUSH = 200
 """Failures whose trajectories are buffered before a part file is written."""
@@ -105,8 +115,11 @@ def find_damage(directory: Path) -> str | None:
         return _unreadable_file(directory)
     if not isinstance(recorded, dict):
         return "summary.json: checksums is not a table of files"
+    left_out = summary.get(LEFT_OUT_KEY, [])
     for name, digest in recorded.items():
         path = directory / name
+        if name.partition("/")[0] in left_out and not path.exists():
+            continue
         if not path.is_file():
             return f"{name} is missing"
         if _sha256(path) != digest:
@@ -256,3 +269,35 @@ def read_trajectory(run_directory: Path, episode: int) -> list[TrajectorySample]
     table = pd.read_parquet(run_directory / "trajectories", filters=[("episode", "==", episode)])
     table = table.sort_values("time")
     return [TrajectorySample.from_row(row) for row in table.to_dict("records")]
+
+
+def left_out(directory: Path) -> list[str]:
+    """The folders the copy of a finished run left out (empty for a run as it was recorded)."""
+    summary = json.loads((directory / "summary.json").read_bytes())
+    return [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
+
+
+def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -> None:
+    """Copy the finished, undamaged run ``source`` to ``destination`` (which must not exist),
+    without the folders ``leave_out`` (of :data:`LEAVABLE`), atomically: a hidden sibling is
+    renamed into place once complete. Its ``summary.json`` keeps the checksums of every file
+    and lists what was left out.
+
+    Raises:
+        ValueError: ``leave_out`` names a folder outside :data:`LEAVABLE`.
+    """
+    unknown = set(leave_out) - set(LEAVABLE)
+    if unknown:
+        raise ValueError(f"only {', '.join(LEAVABLE)} can be left out, not {sorted(unknown)}")
+    partial = destination.with_name(f".{destination.name}.partial")
+    shutil.rmtree(partial, ignore_errors=True)
+    try:
+        shutil.copytree(source, partial, ignore=shutil.ignore_patterns(*leave_out, "summary.json"))
+        summary = json.loads((source / "summary.json").read_bytes())
+        already = [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
+        summary[LEFT_OUT_KEY] = sorted(set(already) | set(leave_out))
+        write_json_atomic(partial / "summary.json", summary)
+        partial.rename(destination)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise

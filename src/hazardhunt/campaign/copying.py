@@ -1,0 +1,106 @@
+"""Copies of results small enough to keep in version control: a run or campaign directory
+without its failures' trajectories.
+
+A copy holds every table, configuration and summary, and the testers' state; the report and
+the export work on it (the failures of the built-in SUT replay from their recorded actions).
+Only finished runs whose files match their checksums are copied; copying again adds the runs
+finished since, so a campaign run in slices can be copied after each slice.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hazardhunt.campaign.config import CampaignConfig, ConfigError
+from hazardhunt.campaign.run import is_finished
+from hazardhunt.campaign.store import (
+    LEAVABLE,
+    LEFT_OUT_KEY,
+    copy_run,
+    find_damage,
+    write_json_atomic,
+)
+
+
+@dataclass
+class Copied:
+    """What :func:`copy_results` did, by run id."""
+
+    copied: list[str] = field(default_factory=list)
+    already_there: list[str] = field(default_factory=list)
+    unfinished: list[str] = field(default_factory=list)
+    damaged: dict[str, str] = field(default_factory=dict)
+
+
+def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = LEAVABLE) -> Copied:
+    """Copy the finished, undamaged runs of the run or campaign directory ``source`` into
+    ``destination``, without the folders ``leave_out``.
+
+    A campaign's ``campaign.json`` and ``summary.json`` are copied as they are; a run already
+    in ``destination`` with the same summary is left alone, one with another summary (run
+    again since) is replaced.
+
+    Raises:
+        ConfigError: ``source`` is neither a run nor a campaign directory, a run that has not
+            finished or is damaged, or ``destination`` holds other results.
+    """
+    if destination.resolve().is_relative_to(source.resolve()):
+        raise ConfigError(f"{destination}: inside the results it would copy; name another folder")
+    if (source / "campaign.json").is_file():
+        return _copy_campaign(source, destination, leave_out)
+    if not (source / "config.json").is_file():
+        raise ConfigError(f"{source}: not a run or campaign directory")
+    if not is_finished(source):
+        raise ConfigError(f"{source}: the run has not finished (no summary.json)")
+    if (damage := find_damage(source)) is not None:
+        raise ConfigError(f"{source}: the run is damaged ({damage}); run it again")
+    copied = Copied()
+    _copy_if_new(source, destination, leave_out, copied)
+    return copied
+
+
+def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) -> Copied:
+    config_text = (source / "campaign.json").read_text()
+    config = CampaignConfig.model_validate_json(config_text)
+    theirs = destination / "campaign.json"
+    if theirs.is_file():
+        if json.loads(theirs.read_text()) != json.loads(config_text):
+            raise ConfigError(f"{destination}: holds the copy of another campaign")
+    elif destination.exists() and any(destination.iterdir()):
+        raise ConfigError(f"{destination}: exists and holds something else than this campaign")
+    (destination / "runs").mkdir(parents=True, exist_ok=True)
+    copied = Copied()
+    for run in config.runs():
+        path = source / "runs" / run.run_id
+        if not is_finished(path):
+            copied.unfinished.append(run.run_id)
+        elif (damage := find_damage(path)) is not None:
+            copied.damaged[run.run_id] = damage
+        else:
+            _copy_if_new(path, destination / "runs" / run.run_id, leave_out, copied)
+    write_json_atomic(destination / "campaign.json", json.loads(config_text))
+    if (source / "summary.json").is_file():
+        write_json_atomic(
+            destination / "summary.json", json.loads((source / "summary.json").read_text())
+        )
+    return copied
+
+
+def _copy_if_new(
+    source: Path, destination: Path, leave_out: tuple[str, ...], copied: Copied
+) -> None:
+    if is_finished(destination):
+        mine = json.loads((destination / "summary.json").read_text())
+        mine.pop(LEFT_OUT_KEY, None)
+        theirs = json.loads((source / "summary.json").read_text())
+        theirs.pop(LEFT_OUT_KEY, None)
+        if mine == theirs and find_damage(destination) is None:
+            copied.already_there.append(destination.name)
+            return
+    if destination.exists():
+        shutil.rmtree(destination)
+    copy_run(source, destination, leave_out)
+    copied.copied.append(destination.name)

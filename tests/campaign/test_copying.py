@@ -1,0 +1,106 @@
+"""``hazardhunt copy``: results without trajectories, which report and export still read."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from hazardhunt.analysis.results import load_results
+from hazardhunt.campaign.store import find_damage
+from tests.helpers import hazardhunt
+
+CAMPAIGN = """\
+scenarios = ["overtaking"]
+fields = ["2m"]
+testers = ["random"]
+seeds = [0, 1]
+episodes = 6
+"""
+"""Two short runs with failures (overtaking behind the 2 m field)."""
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The campaign with only its seed-0 run finished (a first slice)."""
+    folder = tmp_path_factory.mktemp("copy")
+    (folder / "campaign.toml").write_text(CAMPAIGN)
+    out = folder / "campaign"
+    result = hazardhunt("campaign", folder / "campaign.toml", "--out", out, "--runs", "*seed0")
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def sizes(directory: Path) -> int:
+    return sum(path.stat().st_size for path in directory.rglob("*") if path.is_file())
+
+
+def test_a_copy_leaves_the_trajectories_out_and_reads_as_the_original(
+    campaign: Path, tmp_path: Path
+) -> None:
+    copy = tmp_path / "kept"
+    result = hazardhunt("copy", campaign, "--out", copy)
+    assert result.returncode == 0, result.stderr
+    assert "1 run(s) copied, 0 already there, 1 not finished yet" in result.stdout
+    [run] = (copy / "runs").iterdir()
+    assert not (run / "trajectories").exists()
+    assert (campaign / "runs" / run.name / "trajectories").is_dir()
+    assert sizes(copy) < sizes(campaign) / 2
+    assert find_damage(run) is None
+    original, copied = load_results(campaign), load_results(copy)
+    assert len(copied.failures) > 0
+    for table in ("episodes", "failures"):
+        pd.testing.assert_frame_equal(
+            getattr(original, table).drop(columns="directory", errors="ignore"),
+            getattr(copied, table).drop(columns="directory", errors="ignore"),
+        )
+    exported = hazardhunt("export", copy, "--out", tmp_path / "cases")
+    assert exported.returncode == 0, exported.stderr
+    assert list((tmp_path / "cases").glob("*.toml"))
+
+
+def test_copying_after_the_next_slice_adds_only_its_runs(campaign: Path, tmp_path: Path) -> None:
+    mine = tmp_path / "campaign"
+    shutil.copytree(campaign, mine)
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", mine, "--out", copy).returncode == 0
+    first = {str(p.relative_to(copy)): p.stat().st_mtime_ns for p in (copy / "runs").rglob("*")}
+    rest = hazardhunt("campaign", campaign.parent / "campaign.toml", "--out", mine)
+    assert rest.returncode == 0, rest.stderr
+    again = hazardhunt("copy", mine, "--out", copy)
+    assert "1 run(s) copied, 1 already there, 0 not finished yet" in again.stdout
+    after = {str(p.relative_to(copy)): p.stat().st_mtime_ns for p in (copy / "runs").rglob("*")}
+    assert {name: after[name] for name in first} == first
+    assert json.loads((copy / "summary.json").read_text())["runs_complete"] == 2
+
+
+def test_a_file_missing_from_a_copy_is_still_damage(campaign: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", copy).returncode == 0
+    [run, *_] = sorted((copy / "runs").iterdir())
+    (run / "failures.parquet").unlink()
+    assert find_damage(run) == "failures.parquet is missing"
+
+
+def test_a_copy_cannot_be_classified_anew_and_says_why(campaign: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", copy).returncode == 0
+    result = hazardhunt("report", copy, "--reclassify")
+    assert result.returncode == 2
+    [line] = result.stderr.strip().splitlines()
+    assert "a copy without the failures' trajectories, which classifying anew needs" in line
+
+
+def test_a_copy_into_other_results_or_into_the_source_is_refused(
+    campaign: Path, tmp_path: Path
+) -> None:
+    other = tmp_path / "other"
+    (other / "campaign.json").parent.mkdir()
+    (other / "campaign.json").write_text('{"scenarios": ["crossing"]}')
+    refused = hazardhunt("copy", campaign, "--out", other)
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == f"error: {other}: holds the copy of another campaign"
+    inside = hazardhunt("copy", campaign, "--out", campaign / "kept")
+    assert inside.returncode == 2
+    assert "inside the results it would copy" in inside.stderr
