@@ -4,6 +4,8 @@ import json
 import os
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -285,3 +287,26 @@ def test_a_copy_without_trajectories_reports_the_same_failures_and_replays_them(
             pd.read_csv(copy / "report" / "tables" / f"{table}.csv"),
             pd.read_csv(report / "tables" / f"{table}.csv"),
         )
+
+
+def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_path):
+    kept = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
+    doc = tmp_path / "docs" / "reproduction.md"
+    doc.parent.mkdir()
+    doc.write_text("# Reproducing the study\n\nWritten by hand.\n")
+    command = [
+        sys.executable, "scripts/reproduction.py", "--results", kept, "--doc", doc,
+        "--images", doc.parent / "images" / "study",
+    ]  # fmt: skip
+    for _ in range(2):  # the second time replaces the first, the hand-written part stays
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        assert done.returncode == 0, done.stderr
+    text = doc.read_text()
+    assert text.startswith("# Reproducing the study\n\nWritten by hand.\n")
+    assert text.count("## The full budget") == 1
+    assert f"{len(list((kept / 'runs').iterdir()))} of the study's 81 runs are done" in text
+    for heading in ("Table I", "Table II", "Lesson 1", "Lesson 2", "Lesson 3", "Learning"):
+        assert heading in text
+    assert "![Failures per 500 episodes](images/study/learning_curves.png)" in text
+    assert Image.open(doc.parent / "images" / "study" / "learning_curves.png").size[0] > 0

@@ -75,7 +75,10 @@ def failures_bar_chart(runs: pd.DataFrame, path: Path) -> Path:
 
 
 def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:
-    """Failures per 100 episodes over the runs, one panel per field, one line per tester."""
+    """Failures per N episodes over the runs (the last column of
+    :func:`~hazardhunt.analysis.tables.learning_curves`), one panel per field, one line per
+    tester."""
+    rate = str(curves.columns[-1])
     fields = _ordered_fields(curves["field"])
     figure = Figure(figsize=(4.2 * max(1, len(fields)), 3.4), dpi=100)
     for column, field in enumerate(fields):
@@ -85,14 +88,14 @@ def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:
             group = in_field[in_field["tester"] == tester]
             ax.plot(
                 group["episode"],
-                group["failures per 100 episodes"],
+                group[rate],
                 marker=".",
                 color=colour_of(tester),
                 label=tester,
             )
         ax.set_title(f"field {field}")
         ax.set_xlabel("episode")
-        ax.set_ylabel("failures per 100 episodes")
+        ax.set_ylabel(rate)
         ax.set_ylim(bottom=0)
         if column == 0:
             ax.legend(fontsize=8)

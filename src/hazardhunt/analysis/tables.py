@@ -249,11 +249,13 @@ def failure_rates(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     return in_tester_order(table, ("scenario", "field"))
 
 
-def learning_curves(episodes: pd.DataFrame, bins: int = 20) -> pd.DataFrame:
-    """Failures per 100 episodes over the course of the runs, per tester and field (mean over
-    scenarios and seeds), in ``bins`` equal slices of the budget."""
+def learning_curves(episodes: pd.DataFrame, bins: int = 20, per: int = 100) -> pd.DataFrame:
+    """Failures per ``per`` episodes over the course of the runs, per tester and field (mean
+    over scenarios and seeds), in ``bins`` equal slices of the budget; the last column is
+    named ``failures per <per> episodes``."""
+    column = f"failures per {per} episodes"
     if episodes.empty:
-        return pd.DataFrame(columns=["tester", "field", "episode", "failures per 100 episodes"])
+        return pd.DataFrame(columns=["tester", "field", "episode", column])
     budget = int(episodes["episode"].max()) + 1
     width = max(1, int(np.ceil(budget / bins)))
     frame = episodes.assign(
@@ -262,8 +264,8 @@ def learning_curves(episodes: pd.DataFrame, bins: int = 20) -> pd.DataFrame:
     per_run = frame.groupby(["tester", "field", "run_id", "slice"])["failed"].mean()
     curves = per_run.groupby(["tester", "field", "slice"]).mean().reset_index()
     curves["episode"] = (curves["slice"] + 1) * width
-    curves["failures per 100 episodes"] = 100.0 * curves["failed"]
-    return in_tester_order(curves[["tester", "field", "episode", "failures per 100 episodes"]])
+    curves[column] = per * curves["failed"]
+    return in_tester_order(curves[["tester", "field", "episode", column]])
 
 
 def representatives(failures: pd.DataFrame) -> pd.DataFrame:

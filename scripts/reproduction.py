@@ -1,0 +1,128 @@
+"""Write the full-budget part of docs/reproduction.md from the study's committed results.
+
+The study's grid (``campaigns/study.toml``) runs in slices; after each, ``hazardhunt copy``
+keeps its finished runs without trajectories under ``benchmarks/results/study/``. This script
+reads them and rewrites the part of the document between its two markers (appended at the end
+the first time) with how much of the grid is done and, over the runs done, the study's figure
+and tables beside ours: failures per run, Table I, Table II, Lessons 1, 2 and 3, and the
+learning curves as failures per 500 episodes (a figure under ``docs/images/study/``). The
+paragraphs that judge each lesson stay outside the markers, written by hand.
+
+    python scripts/reproduction.py
+    python scripts/reproduction.py --results DIR --doc docs/reproduction.md --images DIR
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+import pandas as pd
+
+from hazardhunt.analysis import figures, tables
+from hazardhunt.analysis.report import markdown_table
+from hazardhunt.analysis.results import Results, load_results
+from hazardhunt.analysis.study import STUDY_EPISODES
+
+BEGIN = "<!-- full-budget results: written by scripts/reproduction.py; edits here are lost -->"
+END = "<!-- end of the full-budget results -->"
+STUDY_RUNS = 81
+CURVE_WIDTH = 500
+"""Episodes per point of the learning curves."""
+
+
+def section(results: Results, images: Path, doc: Path) -> str:
+    """The Markdown between the markers."""
+    runs = results.runs
+    episodes = int(runs["episodes"].sum())
+    hours = float(runs["wall_time_s"].sum()) / 3600.0
+    lines = [
+        "## The full budget",
+        "",
+        f"{len(runs)} of the study's {STUDY_RUNS} runs are done "
+        f"({', '.join(sorted(runs['run_id']))}), {episodes:,} episodes in {hours:.1f} h of run "
+        f"time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per run on average); "
+        f"{STUDY_RUNS - len(runs)} are left. Each run plays up to the study's "
+        f"{STUDY_EPISODES:,} episodes.",
+        "",
+        "### Failures per run",
+        "",
+        markdown_table(tables.failures_per_run(runs)),
+        "",
+    ]
+    coverage = tables.class_coverage(results)
+    lines += [
+        "### Failure classes found (Table I)",
+        "",
+        markdown_table(coverage.drop(columns=["found", "total"])),
+        "",
+        "### Runtime (Table II)",
+        "",
+        _or_none(tables.runtime_table(runs), "ppo-acc and ppo-max on the same case"),
+        "",
+        "### Lesson 1: RL against random sampling",
+        "",
+        _or_none(tables.lesson_1(runs), "random and PPO runs with the same seed"),
+        "",
+        "### Lesson 2: classes against random sampling, failures per class",
+        "",
+        _or_none(tables.lesson_2(coverage), "random and PPO runs on the same case"),
+        "",
+        markdown_table(tables.failures_per_class(results.failures)),
+        "",
+        "### Lesson 3: reward hacking",
+        "",
+        markdown_table(tables.reward_hacking(results.episodes)),
+        "",
+    ]
+    budget = int(results.episodes["episode"].max()) + 1
+    curves = tables.learning_curves(
+        results.episodes, bins=max(1, math.ceil(budget / CURVE_WIDTH)), per=CURVE_WIDTH
+    )
+    picture = figures.learning_curves_figure(curves, images / "learning_curves.png")
+    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    lines += [
+        "### Learning curves",
+        "",
+        f"Failures per {CURVE_WIDTH} episodes over the whole budget, per tester and field "
+        "(mean over scenarios and seeds).",
+        "",
+        f"![Failures per {CURVE_WIDTH} episodes]({link})",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _or_none(table: pd.DataFrame, needs: str) -> str:
+    return markdown_table(table) if not table.empty else f"Not yet: it needs {needs}."
+
+
+def rewrite(doc: Path, generated: str) -> None:
+    """Put ``generated`` between the markers of ``doc``, or append it with them."""
+    text = doc.read_text()
+    block = f"{BEGIN}\n\n{generated}\n{END}"
+    if BEGIN in text and END in text:
+        before, _, rest = text.partition(BEGIN)
+        _, _, after = rest.partition(END)
+        text = before + block + after
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    doc.write_text(text)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, default=Path("benchmarks/results/study"))
+    parser.add_argument("--doc", type=Path, default=Path("docs/reproduction.md"))
+    parser.add_argument("--images", type=Path, default=Path("docs/images/study"))
+    args = parser.parse_args()
+    results = load_results(args.results)
+    args.images.mkdir(parents=True, exist_ok=True)
+    rewrite(args.doc, section(results, args.images, args.doc))
+    print(f"{args.doc}: {len(results.runs)} runs written")
+
+
+if __name__ == "__main__":
+    main()
