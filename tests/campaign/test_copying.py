@@ -101,6 +101,25 @@ def test_a_copy_into_other_results_or_into_the_source_is_refused(
     refused = hazardhunt("copy", campaign, "--out", other)
     assert refused.returncode == 2
     assert refused.stderr.strip() == f"error: {other}: holds the copy of another campaign"
+    [run, *_] = sorted((campaign / "runs").iterdir())
+    (tmp_path / "mine" / "notes.txt").parent.mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep me")
+    kept = hazardhunt("copy", run, "--out", tmp_path / "mine")
+    assert kept.returncode == 2
+    assert "exists and holds something else than this run" in kept.stderr
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep me"
     inside = hazardhunt("copy", campaign, "--out", campaign / "kept")
     assert inside.returncode == 2
     assert "inside the results it would copy" in inside.stderr
+
+
+def test_a_single_run_copies_and_copies_again_as_already_there(
+    campaign: Path, tmp_path: Path
+) -> None:
+    [run, *_] = sorted((campaign / "runs").iterdir())
+    first = hazardhunt("copy", run, "--out", tmp_path / "run")
+    assert "1 run(s) copied" in first.stdout, first.stderr
+    assert find_damage(tmp_path / "run") is None
+    assert not (tmp_path / "run" / "trajectories").exists()
+    again = hazardhunt("copy", run, "--out", tmp_path / "run")
+    assert "0 run(s) copied, 1 already there" in again.stdout

@@ -57,6 +57,10 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
         raise ConfigError(f"{source}: the run has not finished (no summary.json)")
     if (damage := find_damage(source)) is not None:
         raise ConfigError(f"{source}: the run is damaged ({damage}); run it again")
+    if destination.exists() and any(destination.iterdir()):
+        mine = destination / "config.json"
+        if not mine.is_file() or mine.read_bytes() != (source / "config.json").read_bytes():
+            raise ConfigError(f"{destination}: exists and holds something else than this run")
     copied = Copied()
     _copy_if_new(source, destination, leave_out, copied)
     return copied

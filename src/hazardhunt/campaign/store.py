@@ -12,8 +12,9 @@ Layout of a run directory::
     summary.json         written last: its presence marks the run finished; it holds the
                          SHA-256 of every other file, so that a damaged run is told apart
 
-A copy made by :func:`copy_results` may leave the trajectories out: its ``summary.json`` then
-lists ``trajectories`` under ``left_out``, and their absence is not damage.
+A copy made by ``hazardhunt copy`` (:func:`copy_run`) may leave the trajectories out: its
+``summary.json`` then lists ``trajectories`` under ``left_out``, and their absence is not
+damage.
 """
 
 from __future__ import annotations
