@@ -491,12 +491,13 @@ def copy(
 
     The copy holds every table, summary and configuration and the testers' state; report and
     export work on it (failures of the built-in SUT replay from their actions; the clusters of
-    trajectories and --reclassify need the original). Only finished
-    runs whose files match their checksums are copied; copying a campaign again adds the runs
-    finished since.
+    trajectories and --reclassify need the original). Only finished runs whose files match
+    their checksums are copied; copying a campaign again adds the runs finished since.
     """
+    from hazardhunt.campaign.config import check_output_location
     from hazardhunt.campaign.copying import copy_results
 
+    check_output_location(out)
     copied = copy_results(directory, out)
     for run_id, damage in copied.damaged.items():
         console.print(
