@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.config import ConfigError, RunConfig, load_campaign
 from hazardhunt.campaign.run import record_run
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES
@@ -74,12 +74,56 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run():
         ("qd", {"measures": ["bearing", "colour"]}, "measures: must be distinct names of"),
         ("qd", {"bins": [4, 4]}, "bins: must be one whole number >= 1 per measure"),
         ("qd", {"algorithm": "nsga"}, "algorithm: must be one of cma-me, cma-mae, map-elites"),
+        ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
 )
 def test_bad_search_parameters_are_clear_errors(tester, params, message):
     with pytest.raises(ValueError, match=message):
         make_tester(tester, 0, params)
+
+
+LONG_EPISODES = """\
+scenarios = ["crossing"]
+fields = ["none"]
+testers = ["qd"]
+seeds = [0]
+episodes = 1
+[env]
+episode_duration = 3600
+decision_period = 0.2
+"""
+
+
+def test_qd_over_episodes_too_long_for_a_full_covariance_is_refused_before_it_starts(
+    tmp_path,
+):
+    file = tmp_path / "long.toml"
+    file.write_text(LONG_EPISODES)
+    with pytest.raises(ConfigError) as error:
+        load_campaign(file)
+    assert str(error.value).startswith(
+        f"{file}: tester.qd.es: episodes of 18,000 decisions make action sequences of 36,000 "
+        "numbers, for which 2 emitter(s) with es='cma_es' and 72 cells need 58.0 GiB"
+    )
+    # A diagonal covariance fits: the same campaign with it loads.
+    file.write_text(LONG_EPISODES + '[tester.qd]\nes = "sep_cma_es"\n')
+    assert load_campaign(file).tester == {"qd": {"es": "sep_cma_es"}}
+
+
+def test_qd_with_a_diagonal_covariance_searches_and_says_so():
+    directory = Path(tempfile.mkdtemp()) / "run"
+    config = RunConfig(
+        scenario="head-on",
+        field="none",
+        tester="qd",
+        tester_params={"es": "sep_cma_es", "batch_size": 4},
+        seed=0,
+        episodes=16,
+    )
+    assert record_run(config, directory)["episodes"] == 16
+    assert json.loads((directory / "tester" / "qd.json").read_text())["es"] == "sep_cma_es"
+    assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
 
 
 def test_the_novelty_bonus_pays_for_a_new_failure_not_for_the_same_one_again():

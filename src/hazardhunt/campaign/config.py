@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import os
 import re
 import sys
@@ -310,6 +311,10 @@ class RunConfig(_Strict):
     @model_validator(mode="after")
     def _runs_as_configured(self) -> RunConfig:
         _check_built_in_controller(self.env, self.controller)
+        if self.tester_plugin is None:
+            _check_tester_for_episodes(
+                self.tester, self.tester_params, self.env, ("tester_params",)
+            )
         problem = route_problem(self.scenario, self.env.robot)
         if problem is not None:
             raise invalid(("scenario",), problem, self.scenario)
@@ -377,6 +382,11 @@ class CampaignConfig(_Strict):
     @model_validator(mode="after")
     def _runs_as_configured(self) -> CampaignConfig:
         _check_built_in_controller(self.env, self.controller)
+        for name in self.testers:
+            if name not in self.tester_plugins:
+                _check_tester_for_episodes(
+                    name, self.tester.get(name, {}), self.env, ("tester", name)
+                )
         for index, scenario in enumerate(self.scenarios):
             problem = route_problem(scenario, self.env.robot)
             if problem is not None:
@@ -434,6 +444,24 @@ def _check_tester_params(
         return
     try:
         make_tester(tester, 0, params)  # builds no model: only checks the parameters
+    except TesterParameterError as error:
+        raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
+
+
+def _check_tester_for_episodes(
+    tester: str, params: dict[str, Any], env: EnvOptions, location: tuple[str | int, ...]
+) -> None:
+    """Raises a validation error at ``location`` + the parameter's key when the registered
+    tester ``tester`` cannot search episodes of this length (its ``check_horizon``)."""
+    if tester not in TESTERS:
+        return
+    built = make_tester(tester, 0, params)
+    check = getattr(built, "check_horizon", None)
+    if check is None:
+        return
+    horizon = math.ceil(env.episode_duration / env.decision_period - 1e-9)
+    try:
+        check(horizon)
     except TesterParameterError as error:
         raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
 

@@ -40,6 +40,12 @@ MAX_EMITTERS = 100
 """The most emitters (each keeps a CMA-ES state over the whole action sequence)."""
 MAX_BATCH = 10_000
 """The most episodes an emitter asks for at once."""
+EVOLUTION_STRATEGIES = ("cma_es", "sep_cma_es", "lm_ma_es")
+"""The emitters' evolution strategies (pyribs' names): full covariance, diagonal, limited
+memory."""
+MAX_STATE_BYTES = 2 * 1024**3
+"""The most memory the emitters' states and the archive may take; beyond it a run is refused
+before it starts rather than killed for memory once it has."""
 
 
 class QualityDiversityTester:
@@ -57,6 +63,7 @@ class QualityDiversityTester:
         batch_size: int = 10,
         sigma0: float = 0.6,
         learning_rate: float = 0.02,
+        es: str = "cma_es",
         n_workers: int = 1,
     ) -> None:
         """Args:
@@ -71,6 +78,9 @@ class QualityDiversityTester:
         sigma0: The emitters' initial step size, or the mutation's spread for ``map-elites``
             (actions are in [-1, 1]).
         learning_rate: CMA-MAE's archive learning rate (``cma-mae`` only).
+        es: The emitters' evolution strategy: ``cma_es`` (a full covariance over the whole
+            action sequence, memory growing with its square), ``sep_cma_es`` (diagonal) or
+            ``lm_ma_es`` (limited memory), for long episodes with many decisions.
         n_workers: Processes that play each batch (1: in the run's own process).
 
         Raises:
@@ -96,6 +106,10 @@ class QualityDiversityTester:
             raise TesterParameterError(
                 self.name, "algorithm", f"must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}"
             )
+        if es not in EVOLUTION_STRATEGIES:
+            raise TesterParameterError(
+                self.name, "es", f"must be one of {', '.join(EVOLUTION_STRATEGIES)}, not {es!r}"
+            )
         checks = {
             "emitters": (emitters, f"from 1 to {MAX_EMITTERS}", 1 <= emitters <= MAX_EMITTERS),
             "batch_size": (batch_size, f"from 1 to {MAX_BATCH:,}", 1 <= batch_size <= MAX_BATCH),
@@ -116,6 +130,7 @@ class QualityDiversityTester:
         self.batch_size = batch_size
         self.sigma0 = sigma0
         self.learning_rate = learning_rate
+        self.es = es
         self.n_workers = n_workers
         self.archive: Any = None
 
@@ -147,6 +162,7 @@ class QualityDiversityTester:
             "emergency_stop": (-0.5, 2.5),
         }
         dimension = env.horizon * 2
+        self.check_horizon(env.horizon)
         grid: dict[str, Any] = {"dims": self.bins, "ranges": [ranges[m] for m in self.measures]}
         self.archive = GridArchive(solution_dim=dimension, seed=self.seed, **grid)
         archive, ranker = self.archive, "2imp"
@@ -167,6 +183,7 @@ class QualityDiversityTester:
                 x0=np.zeros(dimension),
                 sigma0=self.sigma0,
                 ranker=ranker,
+                es=self.es,
                 # No bounds: CMA-ES would resample until a whole sequence lies in [-1, 1]; the
                 # simulation clips every action instead, as it does for any tester.
                 batch_size=self.batch_size,
@@ -176,6 +193,34 @@ class QualityDiversityTester:
         ]
         result_archive = self.archive if archive is not self.archive else None
         return Scheduler(archive, emitters, result_archive=result_archive)
+
+    def check_horizon(self, horizon: int) -> None:
+        """Refuse episodes of ``horizon`` decisions when the emitters and the archive over
+        their action sequences would not fit in :data:`MAX_STATE_BYTES` (a full covariance
+        grows with the square of the sequence's length). A run's configuration calls it before
+        the run starts.
+
+        Raises:
+            TesterParameterError: Naming the setting to change.
+        """
+        dimension = 2 * horizon
+        archives = 2 if self.algorithm == "cma-mae" else 1
+        archive = archives * math.prod(self.bins) * (dimension + 8) * 8
+        if self.algorithm == "map-elites" or self.es != "cma_es":
+            per_emitter = 20 * dimension * 8  # a few vectors (lm_ma_es: a few dozen)
+        else:
+            per_emitter = 3 * dimension * dimension * 8  # covariance, eigenbasis, its inverse
+        needed = archive + self.emitters * per_emitter
+        if needed > MAX_STATE_BYTES:
+            raise TesterParameterError(
+                self.name,
+                "es" if per_emitter > archive else "bins",
+                f"episodes of {dimension // 2:,} decisions make action sequences of "
+                f"{dimension:,} numbers, for which {self.emitters} emitter(s) with "
+                f"es={self.es!r} and {math.prod(self.bins):,} cells need "
+                f"{needed / 1024**3:.1f} GiB (at most {MAX_STATE_BYTES / 1024**3:.0f}): use "
+                "es='sep_cma_es', fewer cells, a longer decision period or shorter episodes",
+            )
 
     def _gaussian_emitters(self, archive: Any, dimension: int) -> list[Any]:
         from ribs.emitters import GaussianEmitter
@@ -218,5 +263,6 @@ class QualityDiversityTester:
             "batch_size": self.batch_size,
             "sigma0": self.sigma0,
             "learning_rate": self.learning_rate,
+            "es": self.es,
         }
         (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")
