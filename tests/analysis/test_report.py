@@ -266,12 +266,15 @@ def test_the_report_is_readable_as_the_umask_allows(report):
 
 def test_a_table_the_campaign_cannot_fill_says_which_testers_it_needs(campaign, tmp_path):
     copy = tmp_path / "campaign"
-    shutil.copytree(campaign, copy, ignore=shutil.ignore_patterns("report", "*ppo-acc*"))
+    leave_out = shutil.ignore_patterns("report", "*ppo-acc*", "*random*")
+    shutil.copytree(campaign, copy, ignore=leave_out)
     page = report_module._Report(tmp_path / "report")
     report_module._table_sections(page, load_results(copy), report_module.TABLE_SECTIONS)
     said = {section.title: " ".join(section.parts) for section in page.sections}
     runtime = said["Runtime: accumulated vs maximum reward (Table II)"]
     assert "It needs ppo-acc and ppo-max on the same (scenario, field)" in runtime
+    lesson_1 = said["Lesson 1: does RL find more failures than random sampling?"]
+    assert "It needs random and another tester with the same (scenario, field, seed)" in lesson_1
 
 
 def test_a_copy_without_trajectories_reports_the_same_failures_and_replays_them(

@@ -71,6 +71,13 @@ def test_lesson_1_counts_seed_by_seed_wins_ties_and_losses_against_random():
     assert row["study"] == "24 of 27"
 
 
+def test_without_a_random_run_to_compare_with_lesson_1_is_empty():
+    table = tables.lesson_1(
+        runs([("crossing", "2m", "ppo-max", 0, 4), ("head-on", "2m", "random", 0, 1)])
+    )
+    assert table.empty
+
+
 def test_class_coverage_counts_distinct_named_classes_over_seeds_not_other():
     run_table = runs([("crossing", "1.25m", "random", 0, 3), ("crossing", "1.25m", "random", 1, 1)])
     failures = pd.DataFrame(

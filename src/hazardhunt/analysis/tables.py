@@ -174,9 +174,9 @@ def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
 def _against_baseline(
     table: pd.DataFrame, keys: list[str], value: str
 ) -> list[tuple[str, tuple[int, int, int, int]]]:
-    """Per tester but the baseline, in tester order: in how many cases (rows with the same
-    ``keys`` as a baseline row) its ``value`` is larger, equal or smaller than the baseline's,
-    and the cases."""
+    """Per tester but the baseline that shares a case with it (a row with the same ``keys``
+    as a baseline row), in tester order: in how many cases its ``value`` is larger, equal or
+    smaller than the baseline's, and the cases. Without a shared case a tester is left out."""
     baseline = table[table["tester"] == STUDY_BASELINE].set_index(keys)[value].rename("baseline")
     counts = []
     for tester in sort_testers(table["tester"]):
@@ -184,6 +184,8 @@ def _against_baseline(
             continue
         group = table[table["tester"] == tester]
         paired = group.set_index(keys)[value].to_frame("own").join(baseline, how="inner")
+        if paired.empty:
+            continue
         own, other = paired["own"], paired["baseline"]
         counts.append(
             (
