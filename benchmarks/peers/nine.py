@@ -1,0 +1,92 @@
+"""The nine (scenario, field) cases side by side, from the JSON files ``peers.py`` wrote.
+
+Per case and method: distinct failure classes found (``other`` not counted) and failures, for
+one seed; then the targets of the episode-level testers against the study's testers: whether
+the best of ``--new`` finds at least as many classes as ``random`` and as ``ppo-max`` in every
+case, strictly more in how many, and the union of every method's classes in how many. Later
+files win where two give the same (case, method, seed). Prints Markdown; needs only the
+standard library.
+
+    python benchmarks/peers/nine.py benchmarks/results/peers.json \\
+        benchmarks/results/peers_nine_*.json --seed 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+OTHER = "other"
+BASELINES = ("random", "ppo-max")
+ORDER = (
+    "cem",
+    "qd",
+    "ppo-novelty",
+    "random",
+    "ppo-max",
+    "ppo-acc",
+    "cma",
+    "map-elites",
+    "verifai-ce",
+    "verifai-sa",
+    "verifai-bandit",
+)
+
+
+def rows_of(files: list[Path], seed: int) -> dict[tuple[str, str], dict[str, Any]]:
+    """(case, method) -> row, for ``seed``."""
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    for file in files:
+        for row in json.loads(file.read_text())["runs"]:
+            if row["seed"] == seed:
+                rows[(row["case"], row["method"])] = row
+    return rows
+
+
+def classes(row: dict[str, Any]) -> set[str]:
+    return set(row["classes"]) - {OTHER}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("files", nargs="+", type=Path)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--new", nargs="+", default=["cem", "qd"], help="the new testers")
+    args = parser.parse_args()
+
+    rows = rows_of(args.files, args.seed)
+    cases = sorted({case for case, _ in rows})
+    found = {method for _, method in rows}
+    methods = [m for m in ORDER if m in found] + sorted(found - set(ORDER))
+    print("| case | " + " | ".join(f"`{m}`" for m in methods) + " | all methods |")
+    print("|---" * (len(methods) + 2) + "|")
+    at_least, strictly_more, union_reached, complete = 0, 0, 0, 0
+    for case in cases:
+        union = set().union(*(classes(r) for (c, _), r in rows.items() if c == case))
+        cells = []
+        for method in methods:
+            row = rows.get((case, method))
+            cells.append("-" if row is None else f"{len(classes(row))} ({row['failures']})")
+        print(f"| {case} | " + " | ".join(cells) + f" | {len(union)} |")
+        new = [len(classes(rows[(case, m)])) for m in args.new if (case, m) in rows]
+        base = [len(classes(rows[(case, m)])) for m in BASELINES if (case, m) in rows]
+        if not new or len(base) < len(BASELINES):
+            continue
+        complete += 1
+        best = max(new)
+        at_least += best >= max(base)
+        strictly_more += best > max(base)
+        union_reached += any(
+            classes(rows[(case, m)]) == union for m in args.new if (case, m) in rows
+        )
+    print()
+    print("Cells: classes found (failures). Targets, best of " + ", ".join(args.new) + ":")
+    print(f"- at least as many classes as {' and '.join(BASELINES)}: {at_least} of {complete}")
+    print(f"- strictly more: {strictly_more} of {complete}")
+    print(f"- the union of all methods' classes: {union_reached} of {complete}")
+
+
+if __name__ == "__main__":
+    main()
