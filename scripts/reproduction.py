@@ -1,20 +1,23 @@
 """Write the full-budget part of docs/reproduction.md from the study's committed results.
 
-The study's grid (``campaigns/study.toml``) runs in slices; after each, ``hazardhunt copy``
-keeps its finished runs without trajectories under ``benchmarks/results/study/``. This script
-reads them and rewrites the part of the document between its two markers (appended at the end
-the first time) with how much of the grid is done and, over the runs done, the study's figure
-and tables beside ours: failures per run, Table I, Table II, Lessons 1, 2 and 3, and the
-learning curves as failures per 500 episodes (a figure under ``docs/images/study/``). The
-paragraphs that judge each lesson stay outside the markers, written by hand.
+The study's grid (``campaigns/study.toml``, and ``campaigns/study-search.toml`` for the
+searchers beyond the study's testers) runs in slices; after each, ``hazardhunt copy`` keeps
+the finished runs without trajectories under ``benchmarks/results/study/`` (and
+``study-search/``). This script reads them together and rewrites the part of the document
+between its two markers (appended at the end the first time) with how much of the grid is
+done and, over the runs done, the study's figure and tables beside ours: failures per run,
+Table I, Table II, Lessons 1, 2 and 3, and the learning curves as failures per 500 episodes
+(a figure under ``docs/images/study/``). The paragraphs that judge each lesson stay outside
+the markers, written by hand.
 
     python scripts/reproduction.py
-    python scripts/reproduction.py --results DIR --doc docs/reproduction.md --images DIR
+    python scripts/reproduction.py --results DIR [DIR ...] --doc docs/reproduction.md --images DIR
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 from pathlib import Path
@@ -23,14 +26,45 @@ import pandas as pd
 
 from hazardhunt.analysis import figures, tables
 from hazardhunt.analysis.report import markdown_table
-from hazardhunt.analysis.results import Results, load_results
+from hazardhunt.analysis.results import Results, ResultsError, load_results
 from hazardhunt.analysis.study import STUDY_EPISODES
 
 BEGIN = "<!-- full-budget results: written by scripts/reproduction.py; edits here are lost -->"
 END = "<!-- end of the full-budget results -->"
 STUDY_RUNS = 81
+STUDY_TESTERS = ("random", "ppo-acc", "ppo-max")
 CURVE_WIDTH = 500
 """Episodes per point of the learning curves."""
+
+
+def combined(directories: list[Path]) -> Results:
+    """The results of several campaign (or run) directories as one; those that do not exist
+    yet are skipped.
+
+    Raises:
+        ResultsError: None of them holds a finished run.
+    """
+    loaded = [load_results(d) for d in directories if d.exists()]
+    if not loaded:
+        raise ResultsError(f"no results yet in {', '.join(map(str, directories))}")
+    first = loaded[0]
+    if len(loaded) == 1:
+        return first
+
+    def stacked(name: str) -> pd.DataFrame:
+        return pd.concat([getattr(r, name) for r in loaded], ignore_index=True)
+
+    classifiers = {type(r.classifier) for r in loaded}
+    return dataclasses.replace(
+        first,
+        runs=stacked("runs"),
+        episodes=stacked("episodes"),
+        failures=stacked("failures"),
+        loitering=stacked("loitering"),
+        unfinished=[run for r in loaded for run in r.unfinished],
+        damaged={k: v for r in loaded for k, v in r.damaged.items()},
+        classifier=first.classifier if len(classifiers) == 1 else None,
+    )
 
 
 def section(results: Results, images: Path, doc: Path) -> str:
@@ -38,14 +72,21 @@ def section(results: Results, images: Path, doc: Path) -> str:
     runs = results.runs
     episodes = int(runs["episodes"].sum())
     hours = float(runs["wall_time_s"].sum()) / 3600.0
+    study = runs["tester"].isin(STUDY_TESTERS)
+    others = sorted(set(runs.loc[~study, "tester"]))
+    beyond = (
+        f" Beside them, {int((~study).sum())} runs of {', '.join(others)} on the same grid."
+        if others
+        else ""
+    )
     lines = [
         "## The full budget",
         "",
-        f"{len(runs)} of the study's {STUDY_RUNS} runs are done "
-        f"({', '.join(sorted(runs['run_id']))}), {episodes:,} episodes in {hours:.1f} h of run "
-        f"time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per run on average); "
-        f"{STUDY_RUNS - len(runs)} are left. Each run plays up to the study's "
-        f"{STUDY_EPISODES:,} episodes.",
+        f"{int(study.sum())} of the study's {STUDY_RUNS} runs are done "
+        f"({', '.join(sorted(runs.loc[study, 'run_id']))}); "
+        f"{STUDY_RUNS - int(study.sum())} are left.{beyond} In all {episodes:,} episodes in "
+        f"{hours:.1f} h of run time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per "
+        f"run on average); each run plays the study's {STUDY_EPISODES:,} episodes.",
         "",
         "### Failures per run",
         "",
@@ -114,11 +155,16 @@ def rewrite(doc: Path, generated: str) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--results", type=Path, default=Path("benchmarks/results/study"))
+    parser.add_argument(
+        "--results",
+        type=Path,
+        nargs="+",
+        default=[Path("benchmarks/results/study"), Path("benchmarks/results/study-search")],
+    )
     parser.add_argument("--doc", type=Path, default=Path("docs/reproduction.md"))
     parser.add_argument("--images", type=Path, default=Path("docs/images/study"))
     args = parser.parse_args()
-    results = load_results(args.results)
+    results = combined(args.results)
     args.images.mkdir(parents=True, exist_ok=True)
     rewrite(args.doc, section(results, args.images, args.doc))
     print(f"{args.doc}: {len(results.runs)} runs written")

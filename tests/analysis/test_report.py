@@ -293,14 +293,20 @@ def test_a_copy_without_trajectories_reports_the_same_failures_and_replays_them(
 
 
 def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_path):
-    kept = tmp_path / "kept"
-    assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
+    # The study's testers and the searchers kept apart, as two campaigns would be.
+    study, search = tmp_path / "study", tmp_path / "study-search"
+    for kept, leave in ((study, "*__qd__*"), (search, "*__ppo-*")):
+        assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
+        for run in (kept / "runs").glob(leave):
+            shutil.rmtree(run)
+        for run in (kept / "runs").glob("*__random__*") if kept is search else ():
+            shutil.rmtree(run)
     doc = tmp_path / "docs" / "reproduction.md"
     doc.parent.mkdir()
     doc.write_text("# Reproducing the study\n\nWritten by hand.\n")
     command = [
-        sys.executable, "scripts/reproduction.py", "--results", kept, "--doc", doc,
-        "--images", doc.parent / "images" / "study",
+        sys.executable, "scripts/reproduction.py", "--results", study, search,
+        tmp_path / "not-yet", "--doc", doc, "--images", doc.parent / "images" / "study",
     ]  # fmt: skip
     for _ in range(2):  # the second time replaces the first, the hand-written part stays
         done = subprocess.run(command, capture_output=True, text=True, check=False)
@@ -308,8 +314,10 @@ def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_
     text = doc.read_text()
     assert text.startswith("# Reproducing the study\n\nWritten by hand.\n")
     assert text.count("## The full budget") == 1
-    assert f"{len(list((kept / 'runs').iterdir()))} of the study's 81 runs are done" in text
+    assert "6 of the study's 81 runs are done" in text
+    assert "Beside them, 2 runs of qd on the same grid." in text
     for heading in ("Table I", "Table II", "Lesson 1", "Lesson 2", "Lesson 3", "Learning"):
         assert heading in text
+    assert "| qd |" in text  # the searchers' rows beside the study's testers
     assert "![Failures per 500 episodes](images/study/learning_curves.png)" in text
     assert Image.open(doc.parent / "images" / "study" / "learning_curves.png").size[0] > 0

@@ -1,0 +1,34 @@
+"""The campaign files hazardhunt ships load as their comments describe them."""
+
+from pathlib import Path
+
+import pytest
+
+from hazardhunt.campaign.config import load_campaign
+
+CAMPAIGNS = Path(__file__).parents[2] / "campaigns"
+
+
+@pytest.mark.parametrize(
+    ("name", "runs", "episodes", "testers"),
+    [
+        ("quick.toml", 4, 450, {"cem", "qd", "random", "ppo-max"}),
+        ("reduced.toml", 81, 300, {"random", "ppo-acc", "ppo-max"}),
+        ("study.toml", 81, 20_000, {"random", "ppo-acc", "ppo-max"}),
+        ("study-search.toml", 81, 20_000, {"cem", "qd", "ppo-novelty"}),
+    ],
+)
+def test_a_shipped_campaign_file_loads_with_its_grid(name, runs, episodes, testers):
+    config = load_campaign(CAMPAIGNS / name)
+    assert len(config.runs()) == runs
+    assert config.episodes == episodes
+    assert set(config.testers) == testers
+
+
+def test_every_shipped_campaign_file_is_tested():
+    assert sorted(p.name for p in CAMPAIGNS.glob("*.toml")) == [
+        "quick.toml",
+        "reduced.toml",
+        "study-search.toml",
+        "study.toml",
+    ]
