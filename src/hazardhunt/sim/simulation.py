@@ -166,6 +166,11 @@ class Simulation:
         )
         self._physics_per_decision = self._control_every * controls_per_decision
         self._time_limit = TimeLimit(controller_timeout)
+        self._call_control: Callable[..., Any] = controller.control
+        """The controller's ``control``, under the time limit if there is one (bound again at
+        every reset, so that a method replaced in between is the one called)."""
+        self._call_safety: Callable[..., Any] = safety_layer.update
+        """The safety layer's ``update``, likewise."""
         try:
             self.route: Route = scenario_route(scenario, robot.width)
         except RoutePlanningError as error:
@@ -267,6 +272,9 @@ class Simulation:
         limit) is not called again: the episode ends after its first physics step as
         ``sut_error``."""
         counts = self._counts
+        # The plug-ins' per-step calls for this episode, under the time limit if there is one.
+        self._call_control = self._time_limit.bound("control()", self.controller.control)
+        self._call_safety = self._time_limit.bound("update()", self.safety_layer.update)
         try:
             self._time_limit.call("the safety layer's reset()", self.safety_layer.reset)
         except Exception as error:
@@ -408,14 +416,7 @@ class Simulation:
         else than a SafetyStatus, the episode ends as ``sut_error`` with the state unchanged."""
         try:
             status = checked_status(
-                self._time_limit.call(
-                    "update()",
-                    self.safety_layer.update,
-                    now,
-                    self.robot,
-                    self.human_position,
-                    self.human_params.radius,
-                )
+                self._call_safety(now, self.robot, self.human_position, self.human_params.radius)
             )
         except Exception as error:
             self._counts.safety_layer_errors.append(_named(error))
@@ -495,11 +496,7 @@ class Simulation:
         counts = self._counts
         counts.controller_calls += 1
         try:
-            command = checked_command(
-                self._time_limit.call(
-                    "control()", self.controller.control, now, self.robot, tracked
-                )
-            )
+            command = checked_command(self._call_control(now, self.robot, tracked))
         except Exception as error:
             command = ControlCommand(speed=0.0, yaw_rate=0.0, failed=True, status=_status(error))
             counts.controller_errors.append(_named(error))

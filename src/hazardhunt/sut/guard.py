@@ -13,6 +13,7 @@ recorded, and the run goes on:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 import reprlib
@@ -188,6 +189,13 @@ class TimeLimit:
             )
         self.seconds = seconds
         self._warned = False
+
+    def bound(self, what: str, function: Callable[..., T]) -> Callable[..., T]:
+        """``function`` under the limit, to call as often as needed: ``function`` itself when
+        there is no limit, so that a call per physics step costs nothing more."""
+        if self.seconds is None:
+            return function
+        return functools.partial(self.call, what, function)
 
     def call(self, what: str, function: Callable[..., T], *args: Any) -> T:
         """``function(*args)``, interrupted when it outlasts the limit.
