@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 import itertools
-import math
 import os
 import re
 import sys
@@ -33,6 +32,7 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
+from hazardhunt.sim.simulation import decisions_in, whole_multiple
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
@@ -113,8 +113,7 @@ def decision_period_problem(decision_period: float, control_period: float) -> st
     """Why a human cannot hold each action for ``decision_period`` s against a controller
     called every ``control_period`` s; None if it can (the tolerance of the simulation's own
     check)."""
-    calls = round(decision_period / control_period)
-    if calls >= 1 and abs(calls * control_period - decision_period) <= 1e-9:
+    if whole_multiple(decision_period, control_period) is not None:
         return None
     return (
         f"{decision_period:g} s is not a whole multiple of the controller's period "
@@ -459,9 +458,8 @@ def _check_tester_for_episodes(
     check = getattr(built, "check_horizon", None)
     if check is None:
         return
-    horizon = math.ceil(env.episode_duration / env.decision_period - 1e-9)
     try:
-        check(horizon)
+        check(decisions_in(env.episode_duration, env.decision_period))
     except TesterParameterError as error:
         raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
 

@@ -238,7 +238,7 @@ class Simulation:
     @property
     def horizon(self) -> int:
         """Decisions in an episode that runs its full duration."""
-        return math.ceil(self.termination.episode_duration / self.decision_period - 1e-9)
+        return decisions_in(self.termination.episode_duration, self.decision_period)
 
     def reset(self) -> None:
         """Put human and robot at the scenario's initial state."""
@@ -705,9 +705,20 @@ def check_periods(
     )
 
 
-def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int:
+def whole_multiple(value: float, unit: float) -> int | None:
+    """How many ``unit`` make ``value`` (to 1e-9), None if no whole number of them does."""
     count = round(value / unit)
-    if count >= 1 and abs(count * unit - value) <= 1e-9:
+    return count if count >= 1 and abs(count * unit - value) <= 1e-9 else None
+
+
+def decisions_in(episode_duration: float, decision_period: float) -> int:
+    """Decisions in an episode that runs its full duration (the last one may be cut short)."""
+    return math.ceil(episode_duration / decision_period - 1e-9)
+
+
+def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int:
+    count = whole_multiple(value, unit)
+    if count is not None:
         return count
     below, above = max(math.floor(value / unit), 1) * unit, math.ceil(value / unit) * unit
     nearest = f"{below:g} s" if below >= above else f"{below:g} s or {above:g} s"
