@@ -680,11 +680,11 @@ def _regression_commands(section: _Section, results: Results) -> None:
 
 
 def _incomplete_runs(section: _Section, results: Results) -> None:
-    left_out = len(results.unfinished) + len(results.damaged)
-    if left_out:
+    missing = len(results.unfinished) + len(results.damaged)
+    if missing:
         section.parts.append(
-            f'<p class="warning">{left_out} run{_s(left_out)} of the campaign '
-            f"{'is' if left_out == 1 else 'are'} unfinished or damaged and left out (see Runs).</p>"
+            f'<p class="warning">{missing} run{_s(missing)} of the campaign '
+            f"{'is' if missing == 1 else 'are'} unfinished or damaged and left out (see Runs).</p>"
         )
 
 

@@ -88,29 +88,22 @@ class QualityDiversityTester:
                 range.
         """
         measures, bins = list(measures), list(bins)
-        unknown = [m for m in measures if m not in DESCRIPTOR_NAMES]
-        if unknown or not measures or len(set(measures)) != len(measures):
-            raise TesterParameterError(
-                self.name,
-                "measures",
-                f"must be distinct names of {', '.join(DESCRIPTOR_NAMES)}, not {measures!r}",
-            )
-        if len(bins) != len(measures) or any(b < 1 for b in bins) or math.prod(bins) > MAX_CELLS:
-            raise TesterParameterError(
-                self.name,
-                "bins",
-                f"must be one whole number >= 1 per measure, at most {MAX_CELLS:,} cells in "
-                f"all, not {bins!r}",
-            )
-        if algorithm not in ALGORITHMS:
-            raise TesterParameterError(
-                self.name, "algorithm", f"must be one of {', '.join(ALGORITHMS)}, not {algorithm!r}"
-            )
-        if es not in EVOLUTION_STRATEGIES:
-            raise TesterParameterError(
-                self.name, "es", f"must be one of {', '.join(EVOLUTION_STRATEGIES)}, not {es!r}"
-            )
+        known = set(measures) <= set(DESCRIPTOR_NAMES)
         checks = {
+            "measures": (
+                measures,
+                f"distinct names of {', '.join(DESCRIPTOR_NAMES)}",
+                known and len(set(measures)) == len(measures) > 0,
+            ),
+            "bins": (
+                bins,
+                f"one whole number >= 1 per measure, at most {MAX_CELLS:,} cells in all",
+                len(bins) == len(measures)
+                and all(b >= 1 for b in bins)
+                and math.prod(bins) <= MAX_CELLS,
+            ),
+            "algorithm": (algorithm, f"one of {', '.join(ALGORITHMS)}", algorithm in ALGORITHMS),
+            "es": (es, f"one of {', '.join(EVOLUTION_STRATEGIES)}", es in EVOLUTION_STRATEGIES),
             "emitters": (emitters, f"from 1 to {MAX_EMITTERS}", 1 <= emitters <= MAX_EMITTERS),
             "batch_size": (batch_size, f"from 1 to {MAX_BATCH:,}", 1 <= batch_size <= MAX_BATCH),
             "sigma0": (sigma0, "> 0", sigma0 > 0),

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.testers.base import EpisodeRecorder, TesterParameterError
+from hazardhunt.testers.base import EpisodeRecorder, check_parameters
 
 
 class RandomTester:
@@ -30,10 +30,10 @@ class RandomTester:
         Raises:
             TesterParameterError: ``attempts`` is not a whole number >= 1.
         """
-        if isinstance(attempts, bool) or not isinstance(attempts, int) or attempts < 1:
-            raise TesterParameterError(
-                self.name, "attempts", f"must be a whole number >= 1, not {attempts!r}"
-            )
+        whole = isinstance(attempts, int) and not isinstance(attempts, bool)
+        check_parameters(
+            self.name, {"attempts": (attempts, "a whole number >= 1", whole and attempts >= 1)}
+        )
         self.seed = seed
         self.attempts = attempts
         self.rng = np.random.default_rng(seed)
