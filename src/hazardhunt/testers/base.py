@@ -7,7 +7,7 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, TypeGuard, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
@@ -32,6 +32,11 @@ class TesterParameterError(ValueError):
         self.tester = tester
         self.key = key
         self.problem = problem
+
+
+def is_whole_number(value: object) -> TypeGuard[int]:
+    """Whether ``value`` is an int (a bool is not)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def check_parameters(tester: str, checks: Mapping[str, tuple[object, str, bool]]) -> None:

@@ -10,10 +10,9 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import json
-import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -26,7 +25,14 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, TesterParameterError
+from hazardhunt.sut.guard import is_finite_number
+from hazardhunt.testers.base import (
+    MAX_WORKER_PROCESSES,
+    EpisodeRecorder,
+    TesterParameterError,
+    check_parameters,
+    is_whole_number,
+)
 from hazardhunt.testers.novelty import FailureArchive
 
 NOVELTY_CAP = 1.5
@@ -76,20 +82,12 @@ POLICY_KWARGS = {
 """The MlpPolicy arguments a configuration may set in ``policy_kwargs``, and what each is."""
 
 
-def _is_whole(value: object) -> TypeGuard[int]:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_number(value: object) -> TypeGuard[float]:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def _whole_at_least(least: int) -> tuple[str, Callable[[Any], bool]]:
-    return f"a whole number >= {least}", lambda v: _is_whole(v) and v >= least
+    return f"a whole number >= {least}", lambda v: is_whole_number(v) and v >= least
 
 
 def _number_in(text: str, inside: Callable[[float], bool]) -> tuple[str, Callable[[Any], bool]]:
-    return f"a number {text}", lambda v: _is_number(v) and inside(v)
+    return f"a number {text}", lambda v: is_finite_number(v) and inside(v)
 
 
 _FLAG = ("true or false", lambda v: isinstance(v, bool))
@@ -131,12 +129,10 @@ def check_ppo_parameters(name: str, params: Mapping[str, Any], n_envs: object = 
         params: PPO's keyword arguments (without the tester's own ``n_envs`` and ``novelty``).
         n_envs: Copies of the env stepped at once.
     """
-    if not _is_whole(n_envs) or not 1 <= n_envs <= MAX_WORKER_PROCESSES:
-        raise TesterParameterError(
-            name,
-            "n_envs",
-            f"must be a whole number from 1 to {MAX_WORKER_PROCESSES}, not {n_envs!r}",
-        )
+    envs_ok = is_whole_number(n_envs) and 1 <= n_envs <= MAX_WORKER_PROCESSES
+    check_parameters(
+        name, {"n_envs": (n_envs, f"a whole number from 1 to {MAX_WORKER_PROCESSES}", envs_ok)}
+    )
     defaults = ppo_defaults()
     for key, value in params.items():
         if key in RESERVED_PARAMETERS:
@@ -173,11 +169,12 @@ def _check_policy_kwargs(name: str, values: Mapping[str, Any]) -> None:
         if key == "net_arch":
             layers = value.values() if isinstance(value, dict) else [value]
             good = (not isinstance(value, dict) or set(value) <= {"pi", "vf"}) and all(
-                isinstance(sizes, list) and all(_is_whole(n) and 1 <= n <= 4096 for n in sizes)
+                isinstance(sizes, list)
+                and all(is_whole_number(n) and 1 <= n <= 4096 for n in sizes)
                 for sizes in layers
             )
         elif key == "log_std_init":
-            good = _is_number(value)
+            good = is_finite_number(value)
         else:
             good = isinstance(value, bool)
         if not good:
@@ -220,14 +217,19 @@ class PPOTester:
         novelty = params.pop("novelty", 0.0)
         neighbours = params.pop("novelty_neighbours", 3)
         check_ppo_parameters(name, params, n_envs)
-        if not _is_number(novelty) or not 0 <= novelty <= MAX_NOVELTY:
-            raise TesterParameterError(
-                name, "novelty", f"must be a number from 0 to {MAX_NOVELTY:g}, not {novelty!r}"
-            )
-        if not _is_whole(neighbours) or neighbours < 1:
-            raise TesterParameterError(
-                name, "novelty_neighbours", f"must be a whole number >= 1, not {neighbours!r}"
-            )
+        checks = {
+            "novelty": (
+                novelty,
+                f"a number from 0 to {MAX_NOVELTY:g}",
+                is_finite_number(novelty) and 0 <= novelty <= MAX_NOVELTY,
+            ),
+            "novelty_neighbours": (
+                neighbours,
+                "a whole number >= 1",
+                is_whole_number(neighbours) and neighbours >= 1,
+            ),
+        }
+        check_parameters(name, checks)
         defaults = ppo_defaults()
         self.name = name
         self.reward: RewardKind = reward

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.testers.base import EpisodeRecorder, check_parameters
+from hazardhunt.testers.base import EpisodeRecorder, check_parameters, is_whole_number
 
 
 class RandomTester:
@@ -30,10 +30,8 @@ class RandomTester:
         Raises:
             TesterParameterError: ``attempts`` is not a whole number >= 1.
         """
-        whole = isinstance(attempts, int) and not isinstance(attempts, bool)
-        check_parameters(
-            self.name, {"attempts": (attempts, "a whole number >= 1", whole and attempts >= 1)}
-        )
+        whole = is_whole_number(attempts) and attempts >= 1
+        check_parameters(self.name, {"attempts": (attempts, "a whole number >= 1", whole)})
         self.seed = seed
         self.attempts = attempts
         self.rng = np.random.default_rng(seed)
