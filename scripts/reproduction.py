@@ -17,7 +17,6 @@ the markers, written by hand.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import os
 from pathlib import Path
@@ -26,7 +25,7 @@ import pandas as pd
 
 from hazardhunt.analysis import figures, tables
 from hazardhunt.analysis.report import markdown_table
-from hazardhunt.analysis.results import Results, ResultsError, load_results
+from hazardhunt.analysis.results import Results, load_results_of
 from hazardhunt.analysis.study import STUDY_EPISODES
 
 BEGIN = "<!-- full-budget results: written by scripts/reproduction.py; edits here are lost -->"
@@ -35,36 +34,6 @@ STUDY_RUNS = 81
 STUDY_TESTERS = ("random", "ppo-acc", "ppo-max")
 CURVE_WIDTH = 500
 """Episodes per point of the learning curves."""
-
-
-def combined(directories: list[Path]) -> Results:
-    """The results of several campaign (or run) directories as one; those that do not exist
-    yet are skipped.
-
-    Raises:
-        ResultsError: None of them holds a finished run.
-    """
-    loaded = [load_results(d) for d in directories if d.exists()]
-    if not loaded:
-        raise ResultsError(f"no results yet in {', '.join(map(str, directories))}")
-    first = loaded[0]
-    if len(loaded) == 1:
-        return first
-
-    def stacked(name: str) -> pd.DataFrame:
-        return pd.concat([getattr(r, name) for r in loaded], ignore_index=True)
-
-    classifiers = {type(r.classifier) for r in loaded}
-    return dataclasses.replace(
-        first,
-        runs=stacked("runs"),
-        episodes=stacked("episodes"),
-        failures=stacked("failures"),
-        loitering=stacked("loitering"),
-        unfinished=[run for r in loaded for run in r.unfinished],
-        damaged={k: v for r in loaded for k, v in r.damaged.items()},
-        classifier=first.classifier if len(classifiers) == 1 else None,
-    )
 
 
 def section(results: Results, images: Path, doc: Path) -> str:
@@ -164,7 +133,10 @@ def main() -> None:
     parser.add_argument("--doc", type=Path, default=Path("docs/reproduction.md"))
     parser.add_argument("--images", type=Path, default=Path("docs/images/study"))
     args = parser.parse_args()
-    results = combined(args.results)
+    present = [directory for directory in args.results if directory.exists()]
+    if not present:
+        raise SystemExit(f"no results yet in {', '.join(map(str, args.results))}")
+    results = load_results_of(present)
     args.images.mkdir(parents=True, exist_ok=True)
     rewrite(args.doc, section(results, args.images, args.doc))
     print(f"{args.doc}: {len(results.runs)} runs written")

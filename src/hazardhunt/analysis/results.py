@@ -79,24 +79,41 @@ class Results:
 
 
 def load_results(directory: Path, classifier: FailureClassifier | None = None) -> Results:
-    """Read a run directory or a campaign directory (its finished runs).
+    """Read a run directory or a campaign directory (its finished runs); see
+    :func:`load_results_of`."""
+    return load_results_of([directory], classifier)
+
+
+def load_results_of(
+    directories: Sequence[Path], classifier: FailureClassifier | None = None
+) -> Results:
+    """Read run and campaign directories (their finished runs) as one set of results, named
+    after the first.
 
     Nothing that the results name is imported: a failure classifier the runs recorded by
     import path is not loaded; their recorded classes are read instead.
 
     Args:
-        directory: A run or campaign directory.
+        directories: Run or campaign directories (at least one).
         classifier: Classify every failure anew from its stored trajectory with this
             classifier (None: keep the classes recorded with the runs).
 
     Raises:
-        ResultsError: When ``directory`` is neither, or nothing in it is complete, or it is a
+        ResultsError: When a directory is neither, or nothing in one is complete, or it is a
             run whose files are damaged. A campaign's damaged runs are left out and listed in
             ``damaged``.
     """
-    run_directories, unfinished, damaged = _finished_runs(directory)
-    if not run_directories:
-        raise ResultsError(f"{directory}: {_why(damaged)}")
+    directory = directories[0]
+    run_directories: list[Path] = []
+    unfinished: list[str] = []
+    damaged: dict[str, str] = {}
+    for each in directories:
+        complete, still_running, broken = _finished_runs(each)
+        if not complete:
+            raise ResultsError(f"{each}: {_why(broken)}")
+        run_directories += complete
+        unfinished += still_running
+        damaged |= broken
     summaries = [_read_json(path / "summary.json") for path in run_directories]
     configs = [_read_json(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
