@@ -12,7 +12,10 @@ which must be 0). Prints tables and writes JSON with the command and the date.
     python benchmarks/mutants.py --episodes 1000 --testers random ppo-max --workers 2
 
 A tester is a built-in name or, where the tester registry takes them, an import path
-``package.module:Class``.
+``package.module:Class``; ``--tester-param KEY=VALUE`` sets a parameter of every tester given:
+
+    python benchmarks/mutants.py --testers qd --seeds 0 1 2 --episodes 100 \
+        --tester-param clear_path=true
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import tomllib
 from pydantic import ValidationError
 
 from hazardhunt.campaign.config import PluginSpec, RunConfig
@@ -75,6 +79,7 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
                                     tester=tester,
                                     seed=seed,
                                     episodes=args.episodes,
+                                    tester_params=args.tester_param,
                                     controller=PluginSpec(path=f"{MODULE}:{sut}"),
                                 )
                             )
@@ -82,6 +87,17 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
                             problem = format_validation_error(error)
                             sys.exit(f"error: {tester} on {scenario}/{field}: {problem}")
     return grid
+
+
+def assignment(text: str) -> tuple[str, Any]:
+    """A ``KEY=VALUE`` option as (key, value); the value is read as TOML."""
+    key, separator, value = text.partition("=")
+    if not separator or not key.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    try:
+        return key.strip(), tomllib.loads(f"value = {value}")["value"]
+    except tomllib.TOMLDecodeError:
+        return key.strip(), value
 
 
 def killed_within(runs: list[dict[str, Any]], budget: int) -> int:
@@ -198,9 +214,18 @@ def main() -> None:
         default=[m.__name__ for m in MUTANTS],
         help=f"mutant class names in {MODULE}",
     )
+    parser.add_argument(
+        "--tester-param",
+        type=assignment,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a parameter of every tester given (repeatable), as `hazardhunt run` takes it",
+    )
     parser.add_argument("--workers", type=int, default=2, help="runs executed at once")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mutants.json"))
     args = parser.parse_args()
+    args.tester_param = dict(args.tester_param)
     if args.early > args.episodes:
         parser.error("--early must not exceed --episodes")
 

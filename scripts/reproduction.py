@@ -24,9 +24,11 @@ from pathlib import Path
 import pandas as pd
 
 from hazardhunt.analysis import figures, tables
-from hazardhunt.analysis.report import markdown_table
+from hazardhunt.analysis.report import loitering_frames, markdown_table
 from hazardhunt.analysis.results import Results, load_results_of
-from hazardhunt.analysis.study import STUDY_EPISODES
+from hazardhunt.analysis.study import STUDY_EPISODES, STUDY_REWARDS
+from hazardhunt.campaign.replay import load_run_config, names_sut_plugins, replay_actions
+from hazardhunt.env.rendering import plot_frames
 
 BEGIN = "<!-- full-budget results: written by scripts/reproduction.py; edits here are lost -->"
 END = "<!-- end of the full-budget results -->"
@@ -70,7 +72,9 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
         "### Runtime (Table II)",
         "",
-        _or_none(tables.runtime_table(runs), "ppo-acc and ppo-max on the same case"),
+        _or_none(
+            tables.runtime_table(runs), "ppo-acc and ppo-max on the same case", wall_times=True
+        ),
         "",
         "### Lesson 1: RL against random sampling",
         "",
@@ -84,8 +88,9 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
         "### Lesson 3: reward hacking",
         "",
-        markdown_table(tables.reward_hacking(results.episodes)),
+        markdown_table(readable(tables.reward_hacking(results.episodes))),
         "",
+        *loitering_episode(results, images, doc),
     ]
     budget = int(results.episodes["episode"].max()) + 1
     curves = tables.learning_curves(
@@ -105,8 +110,54 @@ def section(results: Results, images: Path, doc: Path) -> str:
     return "\n".join(lines)
 
 
-def _or_none(table: pd.DataFrame, needs: str) -> str:
-    return markdown_table(table) if not table.empty else f"Not yet: it needs {needs}."
+def loitering_episode(results: Results, images: Path, doc: Path) -> list[str]:
+    """The most typical loitering episode of the accumulated-reward tester (of any tester
+    when it has none), replayed from its actions and drawn as four frames."""
+    loitering = results.loitering
+    if loitering.empty:
+        return ["No episode matched the loitering pattern."]
+    own = loitering[loitering["tester"] == STUDY_REWARDS[0]]
+    typical = tables.typical_loitering(own if not own.empty else loitering)
+    assert typical is not None
+    config = load_run_config(results.run_directory(str(typical["run_id"])))
+    about = (
+        f"{typical['run_id']}, episode {int(typical['episode'])}: {typical['outcome']}, "
+        f"{int(typical['emergency_stops'])} stops, {typical['time_in_field']:.1f} s in the field"
+    )
+    if names_sut_plugins(config):
+        return [f"The most typical loitering episode ({about}) ran a plug-in; not drawn."]
+    simulation, _ = replay_actions(config, typical["actions"])
+    times, captions = loitering_frames(simulation)
+    picture = plot_frames(images / "loitering.png", simulation, times, captions)
+    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    return [
+        f"The most typical loitering episode, replayed from its actions ({about}):",
+        "",
+        f"![The most typical loitering episode]({link})",
+        "",
+    ]
+
+
+def readable(table: pd.DataFrame, wall_times: bool = False) -> pd.DataFrame:
+    """``table`` as people read it: speedups and shares in per cent, times faster as "64x",
+    and with ``wall_times`` its columns in seconds as h:mm."""
+    shown = table.copy()
+    for column in shown.columns:
+        name = str(column)
+        if "speedup" in name or "share" in name:
+            shown[column] = [f"{100.0 * v:.1f} %" for v in shown[column]]
+        elif name.startswith("faster than"):
+            shown[column] = [f"{v:.0f}x" for v in shown[column]]
+        elif wall_times and name.endswith("(s)"):
+            shown[column] = [tables.hours_minutes(v) for v in shown[column]]
+            shown = shown.rename(columns={column: name.removesuffix("(s)") + "(h:mm)"})
+    return shown
+
+
+def _or_none(table: pd.DataFrame, needs: str, wall_times: bool = False) -> str:
+    if table.empty:
+        return f"Not yet: it needs {needs}."
+    return markdown_table(readable(table, wall_times))
 
 
 def rewrite(doc: Path, generated: str) -> None:

@@ -7,7 +7,8 @@ import pytest
 
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.pursuit import PursuitController
-from hazardhunt.testers.random_sampling import RandomTester, human_path
+from hazardhunt.testers.clear_path import human_path
+from hazardhunt.testers.random_sampling import RandomTester
 
 
 @pytest.fixture(scope="module")

@@ -45,10 +45,11 @@ def test_a_budget_that_ends_within_a_batch_is_spent_exactly():
 
 
 @pytest.mark.slow
-def test_a_batch_on_two_worker_processes_gives_the_same_run():
+@pytest.mark.parametrize("clear_path", [False, True])
+def test_a_batch_on_two_worker_processes_gives_the_same_run(clear_path):
     def run(workers):
         directory = Path(tempfile.mkdtemp()) / "run"
-        params = {"population": 6, "n_workers": workers}
+        params = {"population": 6, "n_workers": workers, "clear_path": clear_path}
         config = RunConfig(
             scenario="head-on",
             field="none",
@@ -75,6 +76,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run():
         ("qd", {"bins": [4, 4]}, "bins: must be one whole number >= 1 per measure"),
         ("qd", {"algorithm": "nsga"}, "algorithm: must be one of cma-me, cma-mae, map-elites"),
         ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
+        ("qd", {"clear_path": "yes"}, "clear_path: must be true or false, not 'yes'"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
 )

@@ -134,13 +134,13 @@ def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
             f"{acc} (s)": means[acc],
             f"{most} (s)": means[most],
             "speedup": 1.0 - means[most] / means[acc],
-            f"{acc} per 20k (h:mm)": _hours_minutes(per_episode[acc] * STUDY_EPISODES),
-            f"{most} per 20k (h:mm)": _hours_minutes(per_episode[most] * STUDY_EPISODES),
+            f"{acc} per 20k (h:mm)": hours_minutes(per_episode[acc] * STUDY_EPISODES),
+            f"{most} per 20k (h:mm)": hours_minutes(per_episode[most] * STUDY_EPISODES),
         }
         if study:
             row |= {
-                f"study {acc} (h:mm)": _hours_minutes(study[acc] * 60.0),
-                f"study {most} (h:mm)": _hours_minutes(study[most] * 60.0),
+                f"study {acc} (h:mm)": hours_minutes(study[acc] * 60.0),
+                f"study {most} (h:mm)": hours_minutes(study[most] * 60.0),
                 "study speedup": 1.0 - study[most] / study[acc],
                 f"faster than the study ({most})": study[most]
                 * 60.0
@@ -292,7 +292,7 @@ def typical_loitering(loitering: pd.DataFrame) -> pd.Series | None:
     return loitering.loc[distance.idxmin()]
 
 
-def _hours_minutes(seconds: float) -> str:
+def hours_minutes(seconds: float) -> str:
     minutes = round(seconds / 60.0)
     return f"{minutes // 60}:{minutes % 60:02d}"
 

@@ -17,6 +17,7 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.testers.clear_path import play_clear
 
 MAX_WORKER_PROCESSES = 64
 """The most worker processes one run's tester may start (PPO's ``n_envs``, the searchers'
@@ -138,7 +139,10 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         return result
 
     def evaluate_batch(
-        self, sequences: Sequence[NDArray[np.floating[Any]]], workers: int = 1
+        self,
+        sequences: Sequence[NDArray[np.floating[Any]]],
+        workers: int = 1,
+        clear_path: bool = False,
     ) -> list[EpisodeResult]:
         """Play open-loop action sequences and record them, in order, as the run's next episodes.
 
@@ -147,15 +151,21 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
             workers: Worker processes that play the batch at once, each with its own copy of
                 the simulation (kept for the recorder's life); 1 plays it here. The results do
                 not depend on it: every episode is deterministic.
+            clear_path: Whether each action that would walk the human into a static obstacle
+                is replaced by the nearest one that does not, as it is played
+                (:func:`~hazardhunt.testers.clear_path.clear_action`).
         """
-        if workers <= 1 or len(sequences) <= 1:
-            return [self.evaluate(actions) for actions in sequences]
-        if self._pool is None or self._pool_size != workers:
-            self.close_pool()
-            source = self.simulation_factory or self.simulation
-            self._pool = _episode_pool(source, self.keep_trajectory, workers)
-            self._pool_size = workers
-        results = list(self._pool.map(_play_in_worker, [np.asarray(a) for a in sequences]))
+        arrays = [np.asarray(a) for a in sequences]
+        if workers <= 1 or len(arrays) <= 1:
+            keep = self.keep_trajectory
+            results = [_play(self.simulation, a, keep, clear_path) for a in arrays]
+        else:
+            if self._pool is None or self._pool_size != workers:
+                self.close_pool()
+                source = self.simulation_factory or self.simulation
+                self._pool = _episode_pool(source, self.keep_trajectory, workers)
+                self._pool_size = workers
+            results = list(self._pool.map(_play_in_worker, arrays, [clear_path] * len(arrays)))
         for result in results:
             self.record(result)
         return results
@@ -228,9 +238,20 @@ def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], boo
     _worker_simulation = (simulation, keep)
 
 
-def _play_in_worker(actions: NDArray[np.floating[Any]]) -> EpisodeResult:
+def _play_in_worker(actions: NDArray[np.floating[Any]], clear_path: bool) -> EpisodeResult:
     assert _worker_simulation is not None, "the worker was not started with a simulation"
     simulation, keep = _worker_simulation
+    return _play(simulation, actions, keep, clear_path)
+
+
+def _play(
+    simulation: Simulation,
+    actions: NDArray[np.floating[Any]],
+    keep: Callable[[EpisodeSummary], bool],
+    clear_path: bool,
+) -> EpisodeResult:
+    if clear_path:
+        return play_clear(simulation, actions, keep)
     return simulation.simulate(actions, keep)
 
 

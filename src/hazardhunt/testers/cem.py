@@ -49,6 +49,7 @@ class CrossEntropyTester:
         patience: int = 8,
         novelty_radius: float = 0.4,
         n_workers: int = 1,
+        clear_path: bool = False,
     ) -> None:
         """Args:
         seed: Seeds the sampling.
@@ -62,6 +63,8 @@ class CrossEntropyTester:
             as a new mechanism (1 separates opposite sides of the robot or another history of
             the safety layer).
         n_workers: Processes that play each batch (1: in the run's own process).
+        clear_path: Whether an action that would walk the human into a wall or shelf is
+            played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
 
         Raises:
             TesterParameterError: A parameter out of its range.
@@ -83,6 +86,7 @@ class CrossEntropyTester:
                 f"from 1 to {MAX_WORKER_PROCESSES}",
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
+            "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -96,6 +100,7 @@ class CrossEntropyTester:
         self.patience = patience
         self.novelty_radius = novelty_radius
         self.n_workers = n_workers
+        self.clear_path = clear_path
         self.restarts = 0
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
@@ -107,7 +112,7 @@ class CrossEntropyTester:
         while env.episodes_done < episodes:
             count = min(self.population, episodes - env.episodes_done)
             samples = np.clip(mean + std * rng.standard_normal((count, *shape)), -1.0, 1.0)
-            results = env.evaluate_batch(list(samples), self.n_workers)
+            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path)
             if env.episodes_done >= episodes:
                 break  # the budget is spent: nothing left to refit the Gaussian for
             scores, novel = self._scores([r.summary for r in results], archive)

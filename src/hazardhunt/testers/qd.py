@@ -65,6 +65,7 @@ class QualityDiversityTester:
         learning_rate: float = 0.02,
         es: str = "cma_es",
         n_workers: int = 1,
+        clear_path: bool = False,
     ) -> None:
         """Args:
         seed: Seeds the archive and the emitters.
@@ -82,6 +83,8 @@ class QualityDiversityTester:
             action sequence, memory growing with its square), ``sep_cma_es`` (diagonal) or
             ``lm_ma_es`` (limited memory), for long episodes with many decisions.
         n_workers: Processes that play each batch (1: in the run's own process).
+        clear_path: Whether an action that would walk the human into a wall or shelf is
+            played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
 
         Raises:
             TesterParameterError: An unknown measure or algorithm, or a setting out of its
@@ -113,6 +116,7 @@ class QualityDiversityTester:
                 f"from 1 to {MAX_WORKER_PROCESSES}",
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
+            "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -125,6 +129,7 @@ class QualityDiversityTester:
         self.learning_rate = learning_rate
         self.es = es
         self.n_workers = n_workers
+        self.clear_path = clear_path
         self.archive: Any = None
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
@@ -135,7 +140,7 @@ class QualityDiversityTester:
             solutions = scheduler.ask()
             left = episodes - env.episodes_done
             sequences = solutions[:left].reshape(-1, horizon, 2)
-            results = env.evaluate_batch(list(sequences), self.n_workers)
+            results = env.evaluate_batch(list(sequences), self.n_workers, self.clear_path)
             objective = [result.summary.max_risk for result in results]
             measures = [describe(result.summary)[columns] for result in results]
             if len(results) < len(solutions):

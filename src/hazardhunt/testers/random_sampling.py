@@ -7,7 +7,6 @@ physics step); if none of ``attempts`` draws does, the human turns on the spot a
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.testers.base import EpisodeRecorder, check_parameters, is_whole_number
+from hazardhunt.testers.clear_path import human_path
 
 
 class RandomTester:
@@ -58,24 +58,3 @@ class RandomTester:
         """Nothing is learned; the directory records the sampler's settings."""
         directory.mkdir(parents=True, exist_ok=True)
         (directory / "random.txt").write_text(f"seed={self.seed}\nattempts={self.attempts}\n")
-
-
-def human_path(
-    pose: tuple[float, float, float], speed: float, turn_rate: float, duration: float, step: float
-) -> NDArray[np.float64]:
-    """Positions of an unblocked human holding (speed, turn rate), one per physics step."""
-    x, y, heading = pose
-    times = np.arange(1, round(duration / step) + 1) * step
-    if abs(turn_rate) < 1e-9:
-        return np.stack(
-            [x + speed * times * math.cos(heading), y + speed * times * math.sin(heading)], axis=1
-        )
-    radius = speed / turn_rate
-    headings = heading + turn_rate * times
-    return np.stack(
-        [
-            x + radius * (np.sin(headings) - math.sin(heading)),
-            y - radius * (np.cos(headings) - math.cos(heading)),
-        ],
-        axis=1,
-    )
