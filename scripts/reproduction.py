@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import pandas as pd
@@ -115,7 +116,7 @@ def loitering_episode(results: Results, images: Path, doc: Path) -> list[str]:
     when it has none), replayed from its actions and drawn as four frames."""
     loitering = results.loitering
     if loitering.empty:
-        return ["No episode matched the loitering pattern."]
+        return ["No episode matched the loitering pattern.", ""]
     own = loitering[loitering["tester"] == STUDY_REWARDS[0]]
     typical = tables.typical_loitering(own if not own.empty else loitering)
     assert typical is not None
@@ -125,7 +126,7 @@ def loitering_episode(results: Results, images: Path, doc: Path) -> list[str]:
         f"{int(typical['emergency_stops'])} stops, {typical['time_in_field']:.1f} s in the field"
     )
     if names_sut_plugins(config):
-        return [f"The most typical loitering episode ({about}) ran a plug-in; not drawn."]
+        return [f"The most typical loitering episode ({about}) ran a plug-in; not drawn.", ""]
     simulation, _ = replay_actions(config, typical["actions"])
     times, captions = loitering_frames(simulation)
     picture = plot_frames(images / "loitering.png", simulation, times, captions)
@@ -145,13 +146,18 @@ def readable(table: pd.DataFrame, wall_times: bool = False) -> pd.DataFrame:
     for column in shown.columns:
         name = str(column)
         if "speedup" in name or "share" in name:
-            shown[column] = [f"{100.0 * v:.1f} %" for v in shown[column]]
+            shown[column] = _each(shown[column], lambda v: f"{100.0 * v:.1f} %")
         elif name.startswith("faster than"):
-            shown[column] = [f"{v:.0f}x" for v in shown[column]]
+            shown[column] = _each(shown[column], lambda v: f"{v:.0f}x")
         elif wall_times and name.endswith("(s)"):
-            shown[column] = [tables.hours_minutes(v) for v in shown[column]]
+            shown[column] = _each(shown[column], tables.hours_minutes)
             shown = shown.rename(columns={column: name.removesuffix("(s)") + "(h:mm)"})
     return shown
+
+
+def _each(values: pd.Series, show: Callable[[float], str]) -> list[str]:
+    """Every number of ``values`` shown; a missing one as an empty cell."""
+    return ["" if pd.isna(v) else show(float(v)) for v in values]
 
 
 def _or_none(table: pd.DataFrame, needs: str, wall_times: bool = False) -> str:

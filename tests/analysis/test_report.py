@@ -321,3 +321,8 @@ def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_
     assert "| qd |" in text  # the searchers' rows beside the study's testers
     assert "![Failures per 500 episodes](images/study/learning_curves.png)" in text
     assert Image.open(doc.parent / "images" / "study" / "learning_curves.png").size[0] > 0
+    # Table II as people read it: wall times in h:mm, speedups in per cent.
+    assert re.search(r"\| \d+:\d\d \| \d+:\d\d \| -?\d+\.\d % \|", text)
+    # The 2 m field's loitering, replayed from its actions and drawn.
+    assert "The most typical loitering episode, replayed from its actions (" in text
+    assert Image.open(doc.parent / "images" / "study" / "loitering.png").size[0] > 0
