@@ -209,6 +209,22 @@ def test_the_end_of_run_table_counts_failures_in_whole_numbers(tmp_path: Path) -
         assert rows[entry["scenario"]][4] == str(entry["failures"])  # 4, not 4.0
 
 
+def test_a_campaign_written_to_a_log_file_says_how_far_it_is(tmp_path: Path) -> None:
+    # Progress bars do not show in a file: each run that ends writes a line instead.
+    file, out = tmp_path / "one-seed.toml", tmp_path / "campaign"
+    file.write_text(GRID.replace("seeds = [0, 1]", "seeds = [0]"))
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    lines = [line for line in result.stdout.splitlines() if line.startswith("run ")]
+    assert sorted(line.split()[1] for line in lines) == [
+        "head-on__2m__random__seed0",
+        "overtaking__2m__random__seed0",
+    ]
+    assert all(" complete: " in line for line in lines)
+    total = 2 * EPISODES
+    assert lines[-1].endswith(f"2 of 2 runs ended, {total:,} of {total:,} episodes (100%)")
+
+
 @pytest.mark.slow
 def test_ray_records_the_same_episodes_as_local(
     campaign_file: Path, reference: Path, tmp_path: Path

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import fnmatch
+import functools
 import io
 import json
 import logging
@@ -74,6 +75,9 @@ EXECUTORS = ("local", "ray")
 
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
+LOG_INTERVAL_S = 600.0
+"""Time between two progress lines when the campaign's output is not a terminal (a log file,
+where progress bars do not show), in s; every run that ends writes one too."""
 
 WORKER_DEATH_RETRIES = 2
 """Times a run is started again, in a new worker process, after the process executing it died
@@ -386,7 +390,12 @@ def _execute(
     )
     with Progress(*columns, console=console, disable=console is None) as progress:
         # Ray reports a run only once it is done, so only the local executor counts episodes.
-        display = _ProgressDisplay(progress, ledger, pending, show_episodes=executor == "local")
+        log = None
+        if console is not None and not console.is_terminal:
+            log = functools.partial(console.print, markup=False, highlight=False)
+        display = _ProgressDisplay(
+            progress, ledger, pending, show_episodes=executor == "local", log=log
+        )
 
         def on_outcome(outcome: RunOutcome) -> None:
             unwritten = ledger.write_error
@@ -424,10 +433,26 @@ class _ProgressDisplay:
     """Progress bars of the runs and of the episodes done, in complete and running runs."""
 
     def __init__(
-        self, progress: Progress, ledger: _Ledger, pending: list[RunConfig], show_episodes: bool
+        self,
+        progress: Progress,
+        ledger: _Ledger,
+        pending: list[RunConfig],
+        show_episodes: bool,
+        log: Callable[[str], None] | None = None,
     ) -> None:
+        """Args:
+        progress: Where the bars are drawn.
+        ledger: The campaign's runs and how they stand.
+        pending: The runs about to be executed.
+        show_episodes: Whether the episodes done are counted (not with Ray).
+        log: Where a line of progress goes every ``LOG_INTERVAL_S`` and at each run's end,
+            for output that is not a terminal; None for none.
+        """
         complete = [e for e in ledger.entries.values() if e["status"] == "complete"]
         self.progress = progress
+        self.log = log
+        self.logged_at = time.monotonic()
+        self.runs_ended, self.runs_total = len(complete), len(ledger.entries)
         self.episodes_of_complete_runs = sum(int(e["episodes"]) for e in complete)
         self.episodes_total = self.episodes_of_complete_runs + sum(r.episodes for r in pending)
         self.in_flight: dict[str, int] = {}
@@ -460,11 +485,28 @@ class _ProgressDisplay:
         else:
             self.episodes_total -= outcome.config.episodes
         self.progress.advance(self.run_task)
+        self.runs_ended += 1
         self._show_episodes()
+        if self.log is not None:
+            how = "complete" if outcome.summary is not None else "failed"
+            self.log(f"run {outcome.config.run_id} {how}: {self._standing()}")
+            self.logged_at = time.monotonic()
 
     def _show_episodes(self) -> None:
         done = self.episodes_of_complete_runs + sum(self.in_flight.values())
         self.progress.update(self.episode_task, completed=done, total=self.episodes_total)
+        if self.log is not None and time.monotonic() - self.logged_at >= LOG_INTERVAL_S:
+            self.log(self._standing())
+            self.logged_at = time.monotonic()
+
+    def _standing(self) -> str:
+        """How far the campaign is, in one line."""
+        done = self.episodes_of_complete_runs + sum(self.in_flight.values())
+        share = done / self.episodes_total if self.episodes_total else 1.0
+        return (
+            f"{self.runs_ended} of {self.runs_total} runs ended, "
+            f"{done:,} of {self.episodes_total:,} episodes ({share:.0%})"
+        )
 
 
 def _failed(run: RunConfig, error: BaseException) -> RunOutcome:
