@@ -1,6 +1,7 @@
 """PPO testers: the budget, reproducibility, the saved policy and the reward they learn from."""
 
 import json
+import tempfile
 from typing import Any
 
 import gymnasium as gym
@@ -116,3 +117,11 @@ def test_the_first_reset_carries_the_run_seed():
     recorder, _ = explore("ppo-max", seed=12345, episodes=1)
     assert recorder.unwrapped.np_random_seed == 12345
     assert recorder.episodes_done == 1
+
+
+def test_learning_leaves_nothing_in_the_temporary_directory(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    explore("ppo-max", seed=0, episodes=1)
+    # torch keeps one cache directory per user there (torchinductor_<user>), made once and reused.
+    left = [path.name for path in tmp_path.iterdir() if not path.name.startswith("torchinductor_")]
+    assert left == []

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
@@ -268,6 +269,10 @@ class PPOTester:
                 verbose=0,
                 **self.params,
             )
+            if "tensorboard_log" not in self.params:
+                # SB3's default logger makes an empty SB3-<date> directory in the temporary
+                # directory on every learn(); a run keeps its own tables, so it logs nowhere.
+                self.model.set_logger(Logger(folder=None, output_formats=[]))
             # SB3 needs a length; this bound (every episode timing out) is never reached
             # because the callback ends learning at the episode budget.
             self.model.learn(
