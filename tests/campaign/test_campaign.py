@@ -225,6 +225,19 @@ def test_a_campaign_written_to_a_log_file_says_how_far_it_is(tmp_path: Path) -> 
     assert lines[-1].endswith(f"2 of 2 runs ended, {total:,} of {total:,} episodes (100%)")
 
 
+def test_a_slice_written_to_a_log_file_counts_its_own_runs(tmp_path: Path) -> None:
+    file, out = tmp_path / "two-seeds.toml", tmp_path / "campaign"
+    file.write_text(GRID)
+    first = hazardhunt("campaign", file, "--out", out, "--runs", "head-on__*__seed0")
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.splitlines()[0].startswith("run head-on__2m__random__seed0 complete: ")
+    assert f"1 of 1 runs ended, {EPISODES:,} of {EPISODES:,} episodes (100%)" in first.stdout
+    second = hazardhunt("campaign", file, "--out", out, "--runs", "*__seed1")
+    assert second.returncode == 0, second.stderr
+    total = 3 * EPISODES
+    assert f"3 of 3 runs ended, {total:,} of {total:,} episodes (100%)" in second.stdout
+
+
 @pytest.mark.slow
 def test_ray_records_the_same_episodes_as_local(
     campaign_file: Path, reference: Path, tmp_path: Path

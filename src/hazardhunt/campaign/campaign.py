@@ -452,14 +452,14 @@ class _ProgressDisplay:
         self.progress = progress
         self.log = log
         self.logged_at = time.monotonic()
-        self.runs_ended, self.runs_total = len(complete), len(ledger.entries)
+        # A slice (--runs) counts the runs it executes and those already complete, not the
+        # runs it leaves pending, as the episodes do.
+        self.runs_ended, self.runs_total = len(complete), len(complete) + len(pending)
         self.episodes_of_complete_runs = sum(int(e["episodes"]) for e in complete)
         self.episodes_total = self.episodes_of_complete_runs + sum(r.episodes for r in pending)
         self.in_flight: dict[str, int] = {}
         self.ended: set[str] = set()  # a run's last report may arrive after its end
-        self.run_task = progress.add_task(
-            "runs", total=len(ledger.entries), completed=len(complete)
-        )
+        self.run_task = progress.add_task("runs", total=self.runs_total, completed=len(complete))
         self.episode_task = progress.add_task(
             "episodes", total=self.episodes_total, visible=show_episodes
         )
