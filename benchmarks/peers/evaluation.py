@@ -112,7 +112,8 @@ class TesterRun:
     """One run of a hazardhunt tester through its command line, in hazardhunt's own venv."""
 
     tester: str
-    """A registered name (random, ppo-max, ...) or ``package.module:Class``."""
+    """A registered name (random, ppo-max, ...) or ``package.module:Class``, optionally with
+    parameters in brackets: ``cem[aim=true,population=10]``."""
     case: Case
     seed: int
     episodes: int
@@ -122,16 +123,36 @@ class TesterRun:
     """The ``src`` folder put first on the tester's PYTHONPATH: the same code the peers play."""
 
 
+def tester_spec(text: str) -> tuple[str, list[str]]:
+    """``cem[aim=true,population=10]`` as the tester's name and its ``KEY=VALUE`` parameters.
+
+    Raises:
+        ValueError: Brackets that do not close, or a parameter without ``=``.
+    """
+    name, bracket, rest = text.partition("[")
+    if not bracket:
+        return text, []
+    if not rest.endswith("]") or not name:
+        raise ValueError(f"tester {text!r}: write NAME[KEY=VALUE,...]")
+    params = [param.strip() for param in rest[:-1].split(",") if param.strip()]
+    bad = [param for param in params if "=" not in param]
+    if bad:
+        raise ValueError(f"tester {text!r}: {bad[0]!r} is not KEY=VALUE")
+    return name, params
+
+
 def run_tester(run: TesterRun) -> dict[str, Any]:
     """``hazardhunt run ... --json`` into a scratch directory; its ``summary.json``."""
     with tempfile.TemporaryDirectory(prefix="hazardhunt-peers-") as scratch:
         out = Path(scratch) / re.sub(r"[^A-Za-z0-9_.-]", "_", run.tester)
+        name, params = tester_spec(run.tester)
         command = [
             str(run.hazardhunt),
             "run",
             f"--scenario={run.case.scenario}",
             f"--field={run.case.field}",
-            f"--tester={run.tester}",
+            f"--tester={name}",
+            *[f"--tester-param={param}" for param in params],
             f"--episodes={run.episodes}",
             f"--seed={run.seed}",
             f"--out={out}",

@@ -31,7 +31,15 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from evaluation import Case, Evaluation, TesterRun, evaluate_batch, horizon, run_tester
+from evaluation import (
+    Case,
+    Evaluation,
+    TesterRun,
+    evaluate_batch,
+    horizon,
+    run_tester,
+    tester_spec,
+)
 from searchers import BATCHED, METHODS, Points, search
 
 import hazardhunt
@@ -133,7 +141,8 @@ def arguments() -> argparse.Namespace:
         "--testers",
         nargs="*",
         default=["random", "ppo-max"],
-        help="hazardhunt testers to run beside the peers: names or package.module:Class",
+        help="hazardhunt testers to run beside the peers: names or package.module:Class, "
+        "with parameters in brackets if any: 'cem[aim=true]'",
     )
     parser.add_argument(
         "--hazardhunt",
@@ -150,6 +159,8 @@ def arguments() -> argparse.Namespace:
         parser.error("--episodes and --workers must be at least 1")
     try:
         args.cases = [Case.parse(text) for text in args.cases]
+        for tester in args.testers:
+            tester_spec(tester)
     except ValueError as error:
         parser.error(str(error))
     if args.testers and not args.hazardhunt.exists():

@@ -10,6 +10,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from hazardhunt.campaign.config import ConfigError, RunConfig, load_campaign
+from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES
@@ -45,11 +46,13 @@ def test_a_budget_that_ends_within_a_batch_is_spent_exactly():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("clear_path", [False, True])
-def test_a_batch_on_two_worker_processes_gives_the_same_run(clear_path):
+@pytest.mark.parametrize(
+    "played", [{}, {"clear_path": True}, {"aim": True}, {"aim": True, "clear_path": True}]
+)
+def test_a_batch_on_two_worker_processes_gives_the_same_run(played):
     def run(workers):
         directory = Path(tempfile.mkdtemp()) / "run"
-        params = {"population": 6, "n_workers": workers, "clear_path": clear_path}
+        params = {"population": 6, "n_workers": workers} | played
         config = RunConfig(
             scenario="head-on",
             field="none",
@@ -77,6 +80,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(clear_path):
         ("qd", {"algorithm": "nsga"}, "algorithm: must be one of cma-me, cma-mae, map-elites"),
         ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
         ("qd", {"clear_path": "yes"}, "clear_path: must be true or false, not 'yes'"),
+        ("cem", {"aim": 1}, "aim: must be true or false, not 1"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
 )
@@ -126,6 +130,24 @@ def test_qd_with_a_diagonal_covariance_searches_and_says_so():
     assert record_run(config, directory)["episodes"] == 16
     assert json.loads((directory / "tester" / "qd.json").read_text())["es"] == "sep_cma_es"
     assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
+
+
+def test_qd_over_aimed_decisions_finds_failures_that_replay_from_their_actions():
+    directory = Path(tempfile.mkdtemp()) / "run"
+    config = RunConfig(
+        scenario="head-on",
+        field="none",
+        tester="qd",
+        tester_params={"aim": True, "batch_size": 4},
+        seed=0,
+        episodes=16,
+    )
+    assert record_run(config, directory)["episodes"] == 16
+    assert json.loads((directory / "tester" / "qd.json").read_text())["aim"] is True
+    failures = pd.read_parquet(directory / "failures.parquet")
+    assert len(failures) > 0
+    for episode in failures["episode"]:
+        assert replay_failure(directory, int(episode)).matches
 
 
 def test_the_novelty_bonus_pays_for_a_new_failure_not_for_the_same_one_again():

@@ -17,6 +17,7 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
+from hazardhunt.testers.aim import play_aimed
 from hazardhunt.testers.clear_path import play_clear
 
 MAX_WORKER_PROCESSES = 64
@@ -143,29 +144,37 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         sequences: Sequence[NDArray[np.floating[Any]]],
         workers: int = 1,
         clear_path: bool = False,
+        aim: bool = False,
     ) -> list[EpisodeResult]:
         """Play open-loop action sequences and record them, in order, as the run's next episodes.
 
         Args:
-            sequences: Each up to :attr:`horizon` normalised actions.
+            sequences: Each up to :attr:`horizon` normalised actions, or with ``aim`` as many
+                aimed decisions (:mod:`hazardhunt.testers.aim`).
             workers: Worker processes that play the batch at once, each with its own copy of
                 the simulation (kept for the recorder's life); 1 plays it here. The results do
                 not depend on it: every episode is deterministic.
             clear_path: Whether each action that would walk the human into a static obstacle
                 is replaced by the nearest one that does not, as it is played
                 (:func:`~hazardhunt.testers.clear_path.clear_action`).
+            aim: Whether each decision is aimed at the robot (speed, bearing, stand-off) and
+                turned into an action as it is played
+                (:func:`~hazardhunt.testers.aim.aimed_action`).
         """
         arrays = [np.asarray(a) for a in sequences]
         if workers <= 1 or len(arrays) <= 1:
             keep = self.keep_trajectory
-            results = [_play(self.simulation, a, keep, clear_path) for a in arrays]
+            results = [_play(self.simulation, a, keep, clear_path, aim) for a in arrays]
         else:
             if self._pool is None or self._pool_size != workers:
                 self.close_pool()
                 source = self.simulation_factory or self.simulation
                 self._pool = _episode_pool(source, self.keep_trajectory, workers)
                 self._pool_size = workers
-            results = list(self._pool.map(_play_in_worker, arrays, [clear_path] * len(arrays)))
+            count = len(arrays)
+            results = list(
+                self._pool.map(_play_in_worker, arrays, [clear_path] * count, [aim] * count)
+            )
         for result in results:
             self.record(result)
         return results
@@ -238,10 +247,12 @@ def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], boo
     _worker_simulation = (simulation, keep)
 
 
-def _play_in_worker(actions: NDArray[np.floating[Any]], clear_path: bool) -> EpisodeResult:
+def _play_in_worker(
+    actions: NDArray[np.floating[Any]], clear_path: bool, aim: bool
+) -> EpisodeResult:
     assert _worker_simulation is not None, "the worker was not started with a simulation"
     simulation, keep = _worker_simulation
-    return _play(simulation, actions, keep, clear_path)
+    return _play(simulation, actions, keep, clear_path, aim)
 
 
 def _play(
@@ -249,7 +260,10 @@ def _play(
     actions: NDArray[np.floating[Any]],
     keep: Callable[[EpisodeSummary], bool],
     clear_path: bool,
+    aim: bool = False,
 ) -> EpisodeResult:
+    if aim:
+        return play_aimed(simulation, actions, keep, clear_path)
     if clear_path:
         return play_clear(simulation, actions, keep)
     return simulation.simulate(actions, keep)

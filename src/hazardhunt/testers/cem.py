@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.spec.episode import EpisodeSummary
+from hazardhunt.testers.aim import AIM_SIZE
 from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
 
@@ -50,6 +51,7 @@ class CrossEntropyTester:
         novelty_radius: float = 0.4,
         n_workers: int = 1,
         clear_path: bool = False,
+        aim: bool = False,
     ) -> None:
         """Args:
         seed: Seeds the sampling.
@@ -65,6 +67,9 @@ class CrossEntropyTester:
         n_workers: Processes that play each batch (1: in the run's own process).
         clear_path: Whether an action that would walk the human into a wall or shelf is
             played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
+        aim: Whether each decision is aimed at the robot (speed, bearing around it, stand-off:
+            three numbers, :mod:`hazardhunt.testers.aim`) instead of an open-loop (speed, turn
+            rate).
 
         Raises:
             TesterParameterError: A parameter out of its range.
@@ -87,6 +92,7 @@ class CrossEntropyTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
+            "aim": (aim, "true or false", isinstance(aim, bool)),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -101,18 +107,19 @@ class CrossEntropyTester:
         self.novelty_radius = novelty_radius
         self.n_workers = n_workers
         self.clear_path = clear_path
+        self.aim = aim
         self.restarts = 0
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         rng = np.random.default_rng(self.seed)
-        shape = (env.horizon, 2)
+        shape = (env.horizon, AIM_SIZE if self.aim else 2)
         mean, std = np.zeros(shape), np.full(shape, self.initial_std)
         archive = FailureArchive(neighbours=1)
         stale = 0
         while env.episodes_done < episodes:
             count = min(self.population, episodes - env.episodes_done)
             samples = np.clip(mean + std * rng.standard_normal((count, *shape)), -1.0, 1.0)
-            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path)
+            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, self.aim)
             if env.episodes_done >= episodes:
                 break  # the budget is spent: nothing left to refit the Gaussian for
             scores, novel = self._scores([r.summary for r in results], archive)
@@ -156,6 +163,8 @@ class CrossEntropyTester:
             "min_std": self.min_std,
             "patience": self.patience,
             "novelty_radius": self.novelty_radius,
+            "clear_path": self.clear_path,
+            "aim": self.aim,
             "restarts": self.restarts,
         }
         (directory / "cem.json").write_text(json.dumps(settings, indent=2) + "\n")

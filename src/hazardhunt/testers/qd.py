@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES, describe
+from hazardhunt.testers.aim import AIM_SIZE
 from hazardhunt.testers.base import (
     MAX_WORKER_PROCESSES,
     EpisodeRecorder,
@@ -66,6 +67,7 @@ class QualityDiversityTester:
         es: str = "cma_es",
         n_workers: int = 1,
         clear_path: bool = False,
+        aim: bool = False,
     ) -> None:
         """Args:
         seed: Seeds the archive and the emitters.
@@ -85,6 +87,9 @@ class QualityDiversityTester:
         n_workers: Processes that play each batch (1: in the run's own process).
         clear_path: Whether an action that would walk the human into a wall or shelf is
             played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
+        aim: Whether each decision is aimed at the robot (speed, bearing around it, stand-off:
+            three numbers, :mod:`hazardhunt.testers.aim`) instead of an open-loop (speed, turn
+            rate).
 
         Raises:
             TesterParameterError: An unknown measure or algorithm, or a setting out of its
@@ -117,6 +122,7 @@ class QualityDiversityTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
+            "aim": (aim, "true or false", isinstance(aim, bool)),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -130,6 +136,9 @@ class QualityDiversityTester:
         self.es = es
         self.n_workers = n_workers
         self.clear_path = clear_path
+        self.aim = aim
+        self.decision_size = AIM_SIZE if aim else 2
+        """Numbers per decision in a searched sequence."""
         self.archive: Any = None
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
@@ -139,8 +148,8 @@ class QualityDiversityTester:
         while env.episodes_done < episodes:
             solutions = scheduler.ask()
             left = episodes - env.episodes_done
-            sequences = solutions[:left].reshape(-1, horizon, 2)
-            results = env.evaluate_batch(list(sequences), self.n_workers, self.clear_path)
+            sequences = solutions[:left].reshape(-1, horizon, self.decision_size)
+            results = env.evaluate_batch(list(sequences), self.n_workers, self.clear_path, self.aim)
             objective = [result.summary.max_risk for result in results]
             measures = [describe(result.summary)[columns] for result in results]
             if len(results) < len(solutions):
@@ -159,7 +168,7 @@ class QualityDiversityTester:
             "robot_speed": (0.0, env.simulation.robot_params.max_speed),
             "emergency_stop": (-0.5, 2.5),
         }
-        dimension = env.horizon * 2
+        dimension = env.horizon * self.decision_size
         self.check_horizon(env.horizon)
         grid: dict[str, Any] = {"dims": self.bins, "ranges": [ranges[m] for m in self.measures]}
         self.archive = GridArchive(solution_dim=dimension, seed=self.seed, **grid)
@@ -201,7 +210,7 @@ class QualityDiversityTester:
         Raises:
             TesterParameterError: Naming the setting to change.
         """
-        dimension = 2 * horizon
+        dimension = self.decision_size * horizon
         archives = 2 if self.algorithm == "cma-mae" else 1
         archive = archives * math.prod(self.bins) * (dimension + 8) * 8
         if self.algorithm == "map-elites" or self.es != "cma_es":
@@ -213,7 +222,7 @@ class QualityDiversityTester:
             raise TesterParameterError(
                 self.name,
                 "es" if per_emitter > archive else "bins",
-                f"episodes of {dimension // 2:,} decisions make action sequences of "
+                f"episodes of {horizon:,} decisions make action sequences of "
                 f"{dimension:,} numbers, for which {self.emitters} emitter(s) with "
                 f"es={self.es!r} and {math.prod(self.bins):,} cells need "
                 f"{needed / 1024**3:.1f} GiB (at most {MAX_STATE_BYTES / 1024**3:.0f}): use "
@@ -262,5 +271,7 @@ class QualityDiversityTester:
             "sigma0": self.sigma0,
             "learning_rate": self.learning_rate,
             "es": self.es,
+            "clear_path": self.clear_path,
+            "aim": self.aim,
         }
         (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")

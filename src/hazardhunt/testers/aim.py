@@ -1,0 +1,134 @@
+"""Decisions aimed at the robot: a search space in which each decision says where to go around it.
+
+An open-loop sequence of (speed, turn rate) decisions reaches the robot only where the robot
+happens to be when the sequence is played; most of a search over such sequences is spent on
+episodes in which the human never comes near it. Here each decision is three numbers in
+[-1, 1] instead, read in the robot's frame at the moment the decision is played:
+
+- the human's speed (-1 stands, 1 is its top speed),
+- the bearing around the robot it walks towards (0 straight ahead of the robot, +-0.5 its
+  left and right, +-1 behind it),
+- how far from the robot's outline it aims to end up (-1 touching it, 1 ``STANDOFF_MAX`` away).
+
+While played, each decision becomes the (speed, turn rate) action whose arc over the decision
+period ends nearest that point, with the robot's motion extrapolated over the period from its
+current speed and turn rate; the human slows down rather than overshoot. A sequence can so
+follow the robot, wait beside it, step back out of its field and come back in, which is how the
+failures behind a safety layer happen. The actions played are what the episode records, so it
+replays exactly without this module.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.spec.episode import EpisodeSummary
+from hazardhunt.testers.clear_path import clear_action
+
+AIM_SIZE = 3
+"""Numbers per aimed decision: speed, bearing, stand-off."""
+
+STANDOFF_MAX = 3.0
+"""The farthest a decision aims from the robot's outline, in m."""
+
+TURN_CHOICES = np.linspace(-1.0, 1.0, 17)
+"""Normalised turn rates an aimed decision chooses from."""
+
+
+def aim_point(simulation: Simulation, bearing: float, standoff: float) -> NDArray[np.float64]:
+    """Where a decision with ``bearing`` (rad, robot frame) and ``standoff`` (m) aims: the point
+    on that bearing from the robot's centre at which the human disc keeps ``standoff`` from the
+    robot's outline, with the robot's pose extrapolated over one decision period."""
+    robot, period = simulation.robot, simulation.decision_period
+    x, y, heading = _arc_end(robot.x, robot.y, robot.heading, robot.speed, robot.yaw_rate, period)
+    reach = _ray_to_clearance(
+        simulation.robot_params.length / 2,
+        simulation.robot_params.width / 2,
+        bearing,
+        simulation.human_params.radius + standoff,
+    )
+    return np.array(
+        [x + reach * math.cos(heading + bearing), y + reach * math.sin(heading + bearing)]
+    )
+
+
+def aimed_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+    """The normalised (speed, turn rate) action that walks the human, over the next decision
+    period, towards the point ``aim`` (speed, bearing, stand-off in [-1, 1]) names."""
+    wanted_speed, bearing, standoff = np.clip(np.asarray(aim, dtype=np.float64), -1.0, 1.0)
+    target = aim_point(simulation, math.pi * bearing, 0.5 * (standoff + 1.0) * STANDOFF_MAX)
+    human = simulation.human_params
+    period = simulation.decision_period
+    x, y, heading = simulation.human_pose
+    distance = math.hypot(target[0] - x, target[1] - y)
+    speed = min(0.5 * (wanted_speed + 1.0) * human.max_speed, distance / period)
+    if speed < 1e-6:
+        # Standing: face the point, so that the next step towards it starts well.
+        error = math.remainder(math.atan2(target[1] - y, target[0] - x) - heading, math.tau)
+        turn = float(np.clip(error / period / human.max_turn_rate, -1.0, 1.0))
+        return np.array([-1.0, turn], dtype=np.float32)
+    ends = np.array(
+        [
+            _arc_end(x, y, heading, speed, turn * human.max_turn_rate, period)[:2]
+            for turn in TURN_CHOICES
+        ]
+    )
+    best = int(np.argmin(np.hypot(ends[:, 0] - target[0], ends[:, 1] - target[1])))
+    return np.array([2.0 * speed / human.max_speed - 1.0, TURN_CHOICES[best]], dtype=np.float32)
+
+
+def _ray_to_clearance(half_length: float, half_width: float, bearing: float, gap: float) -> float:
+    """How far from a rectangle's centre, along ``bearing`` from its long axis, a point lies
+    ``gap`` from the rectangle (where the ray leaves the rectangle grown by ``gap``, through a
+    flat side or a rounded corner)."""
+    u, v = abs(math.cos(bearing)), abs(math.sin(bearing))
+    if u > 1e-12 and (half_length + gap) / u * v <= half_width:
+        return (half_length + gap) / u  # through the front or the rear
+    if v > 1e-12 and (half_width + gap) / v * u <= half_length:
+        return (half_width + gap) / v  # through the left or the right side
+    # Through a corner: |t (u, v) - (half_length, half_width)| = gap.
+    along = half_length * u + half_width * v
+    return along + math.sqrt(along**2 - (half_length**2 + half_width**2 - gap**2))
+
+
+def _arc_end(
+    x: float, y: float, heading: float, speed: float, turn_rate: float, duration: float
+) -> tuple[float, float, float]:
+    """Where a unicycle holding (speed, turn rate) for ``duration`` ends up: (x, y, heading)."""
+    if abs(turn_rate) < 1e-9:
+        return (
+            x + speed * duration * math.cos(heading),
+            y + speed * duration * math.sin(heading),
+            heading,
+        )
+    radius, end_heading = speed / turn_rate, heading + turn_rate * duration
+    return (
+        x + radius * (math.sin(end_heading) - math.sin(heading)),
+        y - radius * (math.cos(end_heading) - math.cos(heading)),
+        end_heading,
+    )
+
+
+def play_aimed(
+    simulation: Simulation,
+    aims: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
+    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
+    clear_path: bool = False,
+) -> EpisodeResult:
+    """Play one episode from the scenario's start, each of ``aims`` turned into an action
+    (:func:`aimed_action`) at the moment it is played, and made clear of walls and shelves
+    (:func:`~hazardhunt.testers.clear_path.clear_action`) when ``clear_path`` says so."""
+    simulation.reset()
+    for aim in aims:
+        action = aimed_action(simulation, np.asarray(aim))
+        if clear_path:
+            action = clear_action(simulation, action)
+        if simulation.decide(action).outcome is not None:
+            break
+    return simulation.result(keep_trajectory)

@@ -1,0 +1,69 @@
+"""Decisions aimed at the robot: the human goes where each decision says around the robot, and
+the episode replays from the actions it records."""
+
+import math
+
+import numpy as np
+import pytest
+
+from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sut.pursuit import PursuitController
+from hazardhunt.testers.aim import STANDOFF_MAX, aim_point, aimed_action, play_aimed
+from hazardhunt.world.geometry import point_in_body_frame, point_rectangle_clearance
+
+
+@pytest.fixture(scope="module")
+def sim():
+    # A route follower that ignores the human, so that only the aiming decides the distance.
+    return Simulation.build("crossing", "none", controller=PursuitController())
+
+
+def outline_clearance(sim, point):
+    """Clearance between a human disc at ``point`` and the robot's outline where it stands, in m."""
+    robot, params = sim.robot, sim.robot_params
+    forward, left = point_in_body_frame(point[0], point[1], robot.x, robot.y, robot.heading)
+    gap = point_rectangle_clearance(forward, left, params.length, params.width)
+    return gap - sim.human_params.radius
+
+
+def test_a_human_aimed_at_the_robot_walks_into_it_where_it_aims(sim):
+    faces = {}
+    for bearing in (0.0, -0.5, 1.0):
+        result = play_aimed(sim, np.tile([1.0, bearing, -1.0], (sim.horizon, 1)), False)
+        assert result.summary.outcome == "failure"
+        faces[bearing] = result.summary.contact_face
+    # Ahead and from behind it meets the robot coming at it; aimed at its right, its right.
+    assert faces == {0.0: "front", -0.5: "right", 1.0: "front"}
+
+
+def test_the_aim_point_lies_the_stand_off_away_from_the_outline(sim):
+    sim.reset()
+    for bearing in np.linspace(-math.pi, math.pi, 13):
+        for standoff in (0.0, 1.0, STANDOFF_MAX):
+            point = aim_point(sim, bearing, standoff)
+            # At the start the robot stands: the point is where the robot is now.
+            assert outline_clearance(sim, point) == pytest.approx(standoff, abs=1e-9)
+
+
+def test_a_human_aimed_at_a_distance_keeps_it(sim):
+    # Aimed 3 m to the robot's right, the human comes up and walks beside it to the goal.
+    result = play_aimed(sim, np.tile([1.0, -0.5, 1.0], (sim.horizon, 1)), True)
+    assert result.summary.outcome == "goal"
+    assert result.trajectory is not None
+    assert min(s.clearance for s in result.trajectory if s.time >= 2.0) > 2.0
+
+
+def test_the_slowest_aim_stands_and_faces_the_point(sim):
+    sim.reset()
+    action = aimed_action(sim, np.array([-1.0, 0.0, 0.0]))
+    assert action[0] == -1.0
+
+
+def test_an_aimed_episode_replays_from_the_actions_it_records():
+    sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
+    aims = np.random.default_rng(0).uniform(-1.0, 1.0, (sim.horizon, 3))
+    for clear_path in (False, True):
+        result = play_aimed(sim, aims, False, clear_path)
+        replayed = sim.simulate(result.actions, keep_trajectory=False)
+        assert replayed.summary == result.summary
+        np.testing.assert_array_equal(replayed.actions, result.actions)
