@@ -210,10 +210,17 @@ def test_the_end_of_run_table_counts_failures_in_whole_numbers(tmp_path: Path) -
 
 
 def test_a_campaign_written_to_a_log_file_says_how_far_it_is(tmp_path: Path) -> None:
-    # Progress bars do not show in a file: each run that ends writes a line instead.
+    # Progress bars do not show in a file: each run that ends writes a line instead, whole
+    # however narrow the terminal the command was started from.
     file, out = tmp_path / "one-seed.toml", tmp_path / "campaign"
     file.write_text(GRID.replace("seeds = [0, 1]", "seeds = [0]"))
-    result = hazardhunt("campaign", file, "--out", out)
+    result = subprocess.run(
+        [sys.executable, "-m", "hazardhunt.cli", "campaign", str(file), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=os.environ | {"COLUMNS": "40"},
+        check=False,
+    )
     assert result.returncode == 0, result.stderr
     lines = [line for line in result.stdout.splitlines() if line.startswith("run ")]
     assert sorted(line.split()[1] for line in lines) == [

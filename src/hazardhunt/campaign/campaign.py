@@ -392,7 +392,7 @@ def _execute(
         # Ray reports a run only once it is done, so only the local executor counts episodes.
         log = None
         if console is not None and not console.is_terminal:
-            log = functools.partial(console.print, markup=False, highlight=False)
+            log = functools.partial(console.print, markup=False, highlight=False, soft_wrap=True)
         display = _ProgressDisplay(
             progress, ledger, pending, show_episodes=executor == "local", log=log
         )
