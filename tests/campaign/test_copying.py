@@ -75,6 +75,26 @@ def test_copying_after_the_next_slice_adds_only_its_runs(campaign: Path, tmp_pat
     assert json.loads((copy / "summary.json").read_text())["runs_complete"] == 2
 
 
+def test_a_slice_run_in_a_new_campaign_directory_adds_to_the_copy(
+    campaign: Path, tmp_path: Path
+) -> None:
+    # The directory of the first slice is gone (another machine); the next slice starts afresh.
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", copy).returncode == 0
+    fresh = tmp_path / "fresh"
+    file = campaign.parent / "campaign.toml"
+    assert hazardhunt("campaign", file, "--out", fresh, "--runs", "*seed1").returncode == 0
+    again = hazardhunt("copy", fresh, "--out", copy)
+    assert "1 run(s) copied, 0 already there, 1 not finished yet" in again.stdout
+    summary = json.loads((copy / "summary.json").read_text())
+    assert [e["status"] for e in summary["runs"]] == ["complete", "complete"]
+    assert summary["runs_complete"] == 2
+    assert summary["runs_pending"] == 0
+    assert summary["episodes"] == 12
+    assert summary["failures"] == sum(e["failures"] for e in summary["runs"])
+    assert len(load_results(copy).runs) == 2
+
+
 def test_a_file_missing_from_a_copy_is_still_damage(campaign: Path, tmp_path: Path) -> None:
     copy = tmp_path / "kept"
     assert hazardhunt("copy", campaign, "--out", copy).returncode == 0

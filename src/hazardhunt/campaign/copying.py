@@ -13,6 +13,7 @@ import json
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from hazardhunt.campaign.config import CampaignConfig, ConfigError
 from hazardhunt.campaign.run import is_finished
@@ -39,7 +40,9 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
     """Copy the finished, undamaged runs of the run or campaign directory ``source`` into
     ``destination``, without the folders ``leave_out``.
 
-    A campaign's ``campaign.json`` and ``summary.json`` are copied as they are; a run already
+    A campaign's ``campaign.json`` and ``summary.json`` are copied as they are, except that a
+    run the copy already holds finished stays complete in its summary when the source does not
+    have it complete (a campaign directory started afresh after an earlier copy); a run already
     in ``destination`` with the same summary is left alone, one with another summary (run
     again since) is replaced.
 
@@ -87,10 +90,36 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
             _copy_if_new(path, destination / "runs" / run.run_id, leave_out, copied)
     write_json_atomic(destination / "campaign.json", json.loads(config_text))
     if (source / "summary.json").is_file():
-        write_json_atomic(
-            destination / "summary.json", json.loads((source / "summary.json").read_text())
-        )
+        summary = json.loads((source / "summary.json").read_text())
+        kept = destination / "summary.json"
+        if kept.is_file():
+            summary = _keeping_runs(summary, json.loads(kept.read_text()), destination / "runs")
+        write_json_atomic(kept, summary)
     return copied
+
+
+def _keeping_runs(theirs: dict[str, Any], mine: dict[str, Any], runs: Path) -> dict[str, Any]:
+    """The source's campaign summary, with the runs the copy holds finished kept as the copy
+    records them where the source does not have them complete (the source directory was
+    started afresh, or lost its runs since an earlier copy); the totals counted anew."""
+    complete = {e["run_id"]: e for e in mine.get("runs", []) if e.get("status") == "complete"}
+    entries = [
+        complete[e["run_id"]]
+        if e.get("status") != "complete"
+        and e["run_id"] in complete
+        and is_finished(runs / e["run_id"])
+        else e
+        for e in theirs.get("runs", [])
+    ]
+    done = [e for e in entries if e.get("status") == "complete"]
+    return theirs | {
+        "runs_complete": len(done),
+        "runs_failed": sum(e.get("status") == "failed" for e in entries),
+        "runs_pending": sum(e.get("status") == "pending" for e in entries),
+        "episodes": sum(e["episodes"] for e in done),
+        "failures": sum(e["failures"] for e in done),
+        "runs": entries,
+    }
 
 
 def _copy_if_new(
