@@ -53,10 +53,21 @@ def test_a_human_aimed_at_a_distance_keeps_it(sim):
     assert min(s.clearance for s in result.trajectory if s.time >= 2.0) > 2.0
 
 
-def test_the_slowest_aim_stands_and_faces_the_point(sim):
+def test_the_slowest_aim_stands_and_turns_to_face_the_point(sim):
     sim.reset()
-    action = aimed_action(sim, np.array([-1.0, 0.0, 0.0]))
+    aim = np.array([-1.0, 0.5, 0.0])  # 1.5 m to the robot's left
+
+    def facing_error():
+        x, y, heading = sim.human_pose
+        target = aim_point(sim, math.pi * aim[1], 0.5 * (aim[2] + 1.0) * STANDOFF_MAX)
+        return abs(math.remainder(math.atan2(target[1] - y, target[0] - x) - heading, math.tau))
+
+    before, position = facing_error(), sim.human_position
+    action = aimed_action(sim, aim)
     assert action[0] == -1.0
+    sim.decide(action)
+    np.testing.assert_allclose(sim.human_position, position, atol=1e-9)
+    assert facing_error() < before
 
 
 def test_an_aimed_episode_replays_from_the_actions_it_records():
