@@ -1,7 +1,6 @@
 """The episode-level searchers (cem, qd) and the novelty bonus of ppo-novelty."""
 
 import json
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +31,8 @@ def test_the_qd_archive_is_kept_with_its_measures(seeded_run):
     assert archive["objective"].max() == pytest.approx(episodes["max_risk"].max())
 
 
-def test_a_budget_that_ends_within_a_batch_is_spent_exactly():
-    directory = Path(tempfile.mkdtemp()) / "run"
+def test_a_budget_that_ends_within_a_batch_is_spent_exactly(tmp_path):
+    directory = tmp_path / "run"
     config = RunConfig(
         scenario="head-on",
         field="none",
@@ -49,9 +48,9 @@ def test_a_budget_that_ends_within_a_batch_is_spent_exactly():
 @pytest.mark.parametrize(
     "played", [{}, {"clear_path": True}, {"aim": True}, {"aim": True, "clear_path": True}]
 )
-def test_a_batch_on_two_worker_processes_gives_the_same_run(played):
+def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
     def run(workers):
-        directory = Path(tempfile.mkdtemp()) / "run"
+        directory = tmp_path / f"run-{workers}"
         params = {"population": 6, "n_workers": workers} | played
         config = RunConfig(
             scenario="head-on",
@@ -117,8 +116,8 @@ def test_qd_over_episodes_too_long_for_a_full_covariance_is_refused_before_it_st
     assert load_campaign(file).tester == {"qd": {"es": "sep_cma_es"}}
 
 
-def test_qd_with_a_diagonal_covariance_searches_and_says_so():
-    directory = Path(tempfile.mkdtemp()) / "run"
+def test_qd_with_a_diagonal_covariance_searches_and_says_so(tmp_path):
+    directory = tmp_path / "run"
     config = RunConfig(
         scenario="head-on",
         field="none",
@@ -132,8 +131,8 @@ def test_qd_with_a_diagonal_covariance_searches_and_says_so():
     assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
 
 
-def test_qd_over_aimed_decisions_finds_failures_that_replay_from_their_actions():
-    directory = Path(tempfile.mkdtemp()) / "run"
+def test_qd_over_aimed_decisions_finds_failures_that_replay_from_their_actions(tmp_path):
+    directory = tmp_path / "run"
     config = RunConfig(
         scenario="head-on",
         field="none",
