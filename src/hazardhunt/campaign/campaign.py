@@ -68,7 +68,7 @@ from hazardhunt.campaign.run import (
     partial_directory,
     record_run,
 )
-from hazardhunt.campaign.store import find_damage, write_json_atomic
+from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
 
 EXECUTORS = ("local", "ray")
 """Where runs execute: a local process pool, or a Ray cluster."""
@@ -326,15 +326,9 @@ class _Ledger:
     def summary(self) -> dict[str, Any]:
         """The campaign summary: totals, then one entry per run in grid order."""
         entries = list(self.entries.values())
-        complete = [e for e in entries if e["status"] == "complete"]
         return {
             "campaign": self.config.model_dump(mode="json"),
-            "runs_total": len(entries),
-            "runs_complete": len(complete),
-            "runs_failed": sum(e["status"] == "failed" for e in entries),
-            "runs_pending": sum(e["status"] == "pending" for e in entries),
-            "episodes": sum(e["episodes"] for e in complete),
-            "failures": sum(e["failures"] for e in complete),
+            **campaign_totals(entries),
             "updated_at": datetime.now(timezone.utc).isoformat(),
             "runs": entries,
         }

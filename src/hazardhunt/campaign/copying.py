@@ -20,6 +20,7 @@ from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
     LEAVABLE,
     LEFT_OUT_KEY,
+    campaign_totals,
     copy_run,
     find_damage,
     write_json_atomic,
@@ -102,24 +103,14 @@ def _keeping_runs(theirs: dict[str, Any], mine: dict[str, Any], runs: Path) -> d
     """The source's campaign summary, with the runs the copy holds finished kept as the copy
     records them where the source does not have them complete (the source directory was
     started afresh, or lost its runs since an earlier copy); the totals counted anew."""
-    complete = {e["run_id"]: e for e in mine.get("runs", []) if e.get("status") == "complete"}
+    complete = {e["run_id"]: e for e in mine.get("runs", []) if e["status"] == "complete"}
     entries = [
         complete[e["run_id"]]
-        if e.get("status") != "complete"
-        and e["run_id"] in complete
-        and is_finished(runs / e["run_id"])
+        if e["status"] != "complete" and e["run_id"] in complete and is_finished(runs / e["run_id"])
         else e
         for e in theirs.get("runs", [])
     ]
-    done = [e for e in entries if e.get("status") == "complete"]
-    return theirs | {
-        "runs_complete": len(done),
-        "runs_failed": sum(e.get("status") == "failed" for e in entries),
-        "runs_pending": sum(e.get("status") == "pending" for e in entries),
-        "episodes": sum(e["episodes"] for e in done),
-        "failures": sum(e["failures"] for e in done),
-        "runs": entries,
-    }
+    return theirs | campaign_totals(entries) | {"runs": entries}
 
 
 def _copy_if_new(

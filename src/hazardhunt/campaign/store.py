@@ -278,6 +278,20 @@ def left_out(directory: Path) -> list[str]:
     return [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
 
 
+def campaign_totals(entries: list[dict[str, Any]]) -> dict[str, int]:
+    """A campaign summary's counts from its run entries: the runs by status, and the episodes
+    and failures of the complete ones."""
+    complete = [e for e in entries if e["status"] == "complete"]
+    return {
+        "runs_total": len(entries),
+        "runs_complete": len(complete),
+        "runs_failed": sum(e["status"] == "failed" for e in entries),
+        "runs_pending": sum(e["status"] == "pending" for e in entries),
+        "episodes": sum(e["episodes"] for e in complete),
+        "failures": sum(e["failures"] for e in complete),
+    }
+
+
 def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -> None:
     """Copy the finished, undamaged run ``source`` to ``destination`` (which must not exist),
     without the folders ``leave_out`` (of :data:`LEAVABLE`), atomically: a hidden sibling is
