@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.clear_path import clear_action
+from hazardhunt.testers.clear_path import clear_action, human_path, play_decisions
 
 AIM_SIZE = 3
 """Numbers per aimed decision: speed, bearing, stand-off."""
@@ -46,7 +46,10 @@ def aim_point(simulation: Simulation, bearing: float, standoff: float) -> NDArra
     on that bearing from the robot's centre at which the human disc keeps ``standoff`` from the
     robot's outline, with the robot's pose extrapolated over one decision period."""
     robot, period = simulation.robot, simulation.decision_period
-    x, y, heading = _arc_end(robot.x, robot.y, robot.heading, robot.speed, robot.yaw_rate, period)
+    # The robot drives on the same unicycle arc as a human holding its speed and turn rate.
+    pose = (robot.x, robot.y, robot.heading)
+    x, y = human_path(pose, robot.speed, robot.yaw_rate, period, period)[-1]
+    heading = robot.heading + robot.yaw_rate * period
     reach = _ray_to_clearance(
         simulation.robot_params.length / 2,
         simulation.robot_params.width / 2,
@@ -75,7 +78,7 @@ def aimed_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDAr
         return np.array([-1.0, turn], dtype=np.float32)
     ends = np.array(
         [
-            _arc_end(x, y, heading, speed, turn * human.max_turn_rate, period)[:2]
+            human_path((x, y, heading), speed, turn * human.max_turn_rate, period, period)[-1]
             for turn in TURN_CHOICES
         ]
     )
@@ -97,24 +100,6 @@ def _ray_to_clearance(half_length: float, half_width: float, bearing: float, gap
     return along + math.sqrt(along**2 - (half_length**2 + half_width**2 - gap**2))
 
 
-def _arc_end(
-    x: float, y: float, heading: float, speed: float, turn_rate: float, duration: float
-) -> tuple[float, float, float]:
-    """Where a unicycle holding (speed, turn rate) for ``duration`` ends up: (x, y, heading)."""
-    if abs(turn_rate) < 1e-9:
-        return (
-            x + speed * duration * math.cos(heading),
-            y + speed * duration * math.sin(heading),
-            heading,
-        )
-    radius, end_heading = speed / turn_rate, heading + turn_rate * duration
-    return (
-        x + radius * (math.sin(end_heading) - math.sin(heading)),
-        y - radius * (math.cos(end_heading) - math.cos(heading)),
-        end_heading,
-    )
-
-
 def play_aimed(
     simulation: Simulation,
     aims: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
@@ -124,11 +109,9 @@ def play_aimed(
     """Play one episode from the scenario's start, each of ``aims`` turned into an action
     (:func:`aimed_action`) at the moment it is played, and made clear of walls and shelves
     (:func:`~hazardhunt.testers.clear_path.clear_action`) when ``clear_path`` says so."""
-    simulation.reset()
-    for aim in aims:
-        action = aimed_action(simulation, np.asarray(aim))
-        if clear_path:
-            action = clear_action(simulation, action)
-        if simulation.decide(action).outcome is not None:
-            break
-    return simulation.result(keep_trajectory)
+
+    def to_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+        action = aimed_action(simulation, aim)
+        return clear_action(simulation, action) if clear_path else action
+
+    return play_decisions(simulation, aims, to_action, keep_trajectory)

@@ -260,7 +260,7 @@ def _play(
     actions: NDArray[np.floating[Any]],
     keep: Callable[[EpisodeSummary], bool],
     clear_path: bool,
-    aim: bool = False,
+    aim: bool,
 ) -> EpisodeResult:
     if aim:
         return play_aimed(simulation, actions, keep, clear_path)

@@ -78,6 +78,21 @@ def _clear(simulation: Simulation, action: NDArray[np.float32]) -> bool:
     return simulation.scenario.floor.discs_clear(path, simulation.human_params.radius)
 
 
+def play_decisions(
+    simulation: Simulation,
+    decisions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
+    to_action: Callable[[Simulation, NDArray[np.floating[Any]]], NDArray[np.float32]],
+    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
+) -> EpisodeResult:
+    """Play one episode from the scenario's start, each of ``decisions`` turned into the action
+    ``to_action`` gives for it at the moment it is played."""
+    simulation.reset()
+    for decision in decisions:
+        if simulation.decide(to_action(simulation, np.asarray(decision))).outcome is not None:
+            break
+    return simulation.result(keep_trajectory)
+
+
 def play_clear(
     simulation: Simulation,
     actions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
@@ -85,8 +100,4 @@ def play_clear(
 ) -> EpisodeResult:
     """Play one episode from the scenario's start, each of ``actions`` made clear
     (:func:`clear_action`) at the moment it is played."""
-    simulation.reset()
-    for action in actions:
-        if simulation.decide(clear_action(simulation, np.asarray(action))).outcome is not None:
-            break
-    return simulation.result(keep_trajectory)
+    return play_decisions(simulation, actions, clear_action, keep_trajectory)
