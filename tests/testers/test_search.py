@@ -31,17 +31,23 @@ def test_the_qd_archive_is_kept_with_its_measures(seeded_run):
     assert archive["objective"].max() == pytest.approx(episodes["max_risk"].max())
 
 
-def test_a_budget_that_ends_within_a_batch_is_spent_exactly(tmp_path):
-    directory = tmp_path / "run"
+def head_on_run(directory: Path, tester: str, params: dict, episodes: int, seed: int = 0) -> dict:
+    """Run ``tester`` with ``params`` on head-on without a field into ``directory``; its
+    summary."""
     config = RunConfig(
         scenario="head-on",
         field="none",
-        tester="cem",
-        tester_params={"population": 8},  # 2 elites; the last batch plays 1 episode
-        seed=0,
-        episodes=9,
+        tester=tester,
+        tester_params=params,
+        seed=seed,
+        episodes=episodes,
     )
-    assert record_run(config, directory)["episodes"] == 9
+    return record_run(config, directory)
+
+
+def test_a_budget_that_ends_within_a_batch_is_spent_exactly(tmp_path):
+    # 2 elites in a batch of 8; the last batch plays 1 episode.
+    assert head_on_run(tmp_path / "run", "cem", {"population": 8}, episodes=9)["episodes"] == 9
 
 
 @pytest.mark.slow
@@ -52,15 +58,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
     def run(workers):
         directory = tmp_path / f"run-{workers}"
         params = {"population": 6, "n_workers": workers} | played
-        config = RunConfig(
-            scenario="head-on",
-            field="none",
-            tester="cem",
-            tester_params=params,
-            seed=3,
-            episodes=12,
-        )
-        record_run(config, directory)
+        head_on_run(directory, "cem", params, episodes=12, seed=3)
         return run_tables(directory)
 
     (episodes_1, failures_1), (episodes_2, failures_2) = run(1), run(2)
@@ -118,30 +116,17 @@ def test_qd_over_episodes_too_long_for_a_full_covariance_is_refused_before_it_st
 
 def test_qd_with_a_diagonal_covariance_searches_and_says_so(tmp_path):
     directory = tmp_path / "run"
-    config = RunConfig(
-        scenario="head-on",
-        field="none",
-        tester="qd",
-        tester_params={"es": "sep_cma_es", "batch_size": 4},
-        seed=0,
-        episodes=16,
-    )
-    assert record_run(config, directory)["episodes"] == 16
+    params = {"es": "sep_cma_es", "batch_size": 4}
+    assert head_on_run(directory, "qd", params, episodes=16)["episodes"] == 16
     assert json.loads((directory / "tester" / "qd.json").read_text())["es"] == "sep_cma_es"
     assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
 
 
 def test_qd_over_aimed_decisions_finds_failures_that_replay_from_their_actions(tmp_path):
     directory = tmp_path / "run"
-    config = RunConfig(
-        scenario="head-on",
-        field="none",
-        tester="qd",
-        tester_params={"aim": True, "batch_size": 4},
-        seed=0,
-        episodes=16,
+    assert (
+        head_on_run(directory, "qd", {"aim": True, "batch_size": 4}, episodes=16)["episodes"] == 16
     )
-    assert record_run(config, directory)["episodes"] == 16
     assert json.loads((directory / "tester" / "qd.json").read_text())["aim"] is True
     failures = pd.read_parquet(directory / "failures.parquet")
     assert len(failures) > 0
