@@ -326,3 +326,18 @@ def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_
     # The 2 m field's loitering, replayed from its actions and drawn.
     assert "The most typical loitering episode, replayed from its actions (" in text
     assert Image.open(doc.parent / "images" / "study" / "loitering.png").size[0] > 0
+
+
+def test_the_numbers_behind_the_lessons_are_printed_per_run(campaign, tmp_path):
+    kept = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
+    command = [sys.executable, "scripts/study_numbers.py", "--results", kept, "--block", "4"]
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    for run in (kept / "runs").iterdir():
+        summary = json.loads((run / "summary.json").read_text())
+        block = done.stdout.split(run.name + "\n", 1)[1]
+        assert block.startswith(f"  failures {summary['failures']}, first at episode ")
+        per_block = re.search(r"failures per 4: \[([\d, ]*)\]", block)
+        assert per_block is not None
+        assert sum(map(int, per_block.group(1).split(","))) == summary["failures"]

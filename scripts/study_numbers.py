@@ -1,0 +1,78 @@
+"""Per run, the numbers behind the hand-written lessons of docs/reproduction.md.
+
+The generated tables of docs/reproduction.md give each run's totals; the paragraphs that judge
+the study's three lessons also read how a run changes over its budget. For every run kept
+under ``benchmarks/results/study/`` this prints its failures and classes, failures per block
+of ``--block`` episodes (2,000), and per block of ``--long-block`` (5,000) the loitering
+episodes, the share of timeouts, the mean simulated episode and the risk summed by episodes
+without a failure; then the simulated hours, failures per simulated hour, the share of
+failures with a standing human, time in the field, stalls and timeouts.
+
+    python scripts/study_numbers.py
+    python scripts/study_numbers.py --results DIR [DIR ...] --block 2000 --long-block 5000
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pandas as pd
+
+from hazardhunt.analysis.results import load_results_of
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+
+
+def blocks(episodes: pd.DataFrame, size: int) -> list[pd.DataFrame]:
+    """The run's episodes in consecutive blocks of ``size``."""
+    return [group for _, group in episodes.groupby(episodes["episode"] // size, sort=True)]
+
+
+def describe_run(episodes: pd.DataFrame, failures: pd.DataFrame, block: int, long: int) -> str:
+    """The lines printed for one run."""
+    failed = episodes["outcome"] == "failure"
+    hours = episodes["sim_time"].sum() / 3600
+    classes = failures["class"].astype(str).value_counts()
+    standing = classes[classes.index.str.contains("standing")].sum() / max(len(failures), 1)
+    per_block = [int((b["outcome"] == "failure").sum()) for b in blocks(episodes, block)]
+    longer = blocks(episodes, long)
+    safe = [b[b["outcome"] != "failure"] for b in longer]
+    first = int(episodes.loc[failed, "episode"].min()) if failed.any() else None
+    return "\n".join(
+        [
+            f"  failures {int(failed.sum())}, first at episode {first}",
+            f"  classes {classes.to_dict()}",
+            f"  failures per {block:,}: {per_block}",
+            f"  loitering per {long:,}: {[int(b['loitering'].sum()) for b in longer]}",
+            f"  timeouts % per {long:,}: "
+            f"{[round(100 * float((b['outcome'] == 'timeout').mean()), 1) for b in longer]}",
+            f"  mean episode (s) per {long:,}: "
+            f"{[round(float(b['sim_time'].mean()), 1) for b in longer]}",
+            f"  risk sum without failure per {long:,}: "
+            f"{[round(float(b['risk_sum'].mean()), 1) for b in safe]}",
+            f"  simulated hours {hours:.1f}, failures per simulated hour "
+            f"{failed.sum() / hours:.1f}, standing share of failures {standing:.3f}",
+            f"  time in field per episode {episodes['time_in_field'].mean():.2f} s, "
+            f"stalls {int((episodes['outcome'] == 'stall').sum())}, "
+            f"timeouts {int((episodes['outcome'] == 'timeout').sum())}",
+        ]
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    default = REPOSITORY / "benchmarks" / "results" / "study"
+    parser.add_argument("--results", type=Path, nargs="+", default=[default])
+    parser.add_argument("--block", type=int, default=2000, help="episodes per failure count")
+    parser.add_argument("--long-block", type=int, default=5000, help="episodes per trend")
+    args = parser.parse_args()
+    results = load_results_of(args.results)
+    for run_id, episodes in results.episodes.groupby("run_id", sort=True):
+        print(run_id)
+        failures = results.failures[results.failures["run_id"] == run_id]
+        print(describe_run(episodes.sort_values("episode"), failures, args.block, args.long_block))
+
+
+if __name__ == "__main__":
+    main()
