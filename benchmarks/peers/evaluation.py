@@ -89,7 +89,7 @@ def evaluate(case: Case, point: NDArray[np.float64]) -> Evaluation:
     actions = np.clip(np.asarray(point, dtype=np.float64), -1.0, 1.0).reshape(-1, 2)
     result = simulation.simulate(actions, keep_trajectory=lambda s: s.outcome == FAILURE)
     summary = result.summary
-    bearing, robot_speed, _ = describe(summary)
+    bearing, robot_speed = describe(summary)[:2]
     failure_class = None
     if summary.outcome == FAILURE and result.trajectory is not None:
         failure_class = classifier.classify(result.trajectory, summary, simulation.field)
@@ -113,7 +113,7 @@ class TesterRun:
 
     tester: str
     """A registered name (random, ppo-max, ...) or ``package.module:Class``, optionally with
-    parameters in brackets: ``cem[aim=true,population=10]``."""
+    parameters in brackets: ``cem[space=aim,population=10]``."""
     case: Case
     seed: int
     episodes: int
@@ -124,7 +124,7 @@ class TesterRun:
 
 
 def tester_spec(text: str) -> tuple[str, list[str]]:
-    """``cem[aim=true,population=10]`` as the tester's name and its ``KEY=VALUE`` parameters.
+    """``cem[space=aim,population=10]`` as the tester's name and its ``KEY=VALUE`` parameters.
 
     Raises:
         ValueError: Brackets that do not close, or a parameter without ``=``.

@@ -142,7 +142,7 @@ def arguments() -> argparse.Namespace:
         nargs="*",
         default=["random", "ppo-max"],
         help="hazardhunt testers to run beside the peers: names or package.module:Class, "
-        "with parameters in brackets if any: 'cem[aim=true]'",
+        "with parameters in brackets if any: 'cem[space=aim]'",
     )
     parser.add_argument(
         "--hazardhunt",

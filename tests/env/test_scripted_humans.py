@@ -124,7 +124,8 @@ def test_a_human_loitering_in_the_field_stalls_the_episode():
 @pytest.mark.parametrize("field", ["none", "1.25m"])
 def test_the_failure_descriptor_places_a_side_attack_on_the_robots_right(field):
     result = run(make("crossing", field), side_attack)
-    bearing, robot_speed, emergency_stop = describe(result.summary)
+    bearing, robot_speed, emergency_stop, human_speed = describe(result.summary)
     assert -math.pi * 3 / 4 < bearing < -math.pi / 4  # the human came from the south
     assert robot_speed > 0.5
     assert emergency_stop == 0.0  # the field never saw it
+    assert human_speed > 1.0  # it ran into the robot

@@ -1,5 +1,5 @@
-"""Decisions aimed at the robot: the human goes where each decision says around the robot, and
-the episode replays from the actions it records."""
+"""Decisions aimed at the robot or its route: the human goes where each decision says, and the
+episode replays from the actions it records."""
 
 import math
 
@@ -7,8 +7,16 @@ import numpy as np
 import pytest
 
 from hazardhunt.sim.simulation import Simulation
+from hazardhunt.spec.descriptors import measures_of
 from hazardhunt.sut.pursuit import PursuitController
-from hazardhunt.testers.aim import STANDOFF_MAX, aim_point, aimed_action, play_aimed
+from hazardhunt.testers.aim import (
+    ROUTE_OFFSET_MAX,
+    STANDOFF_MAX,
+    aim_point,
+    aimed_action,
+    route_point,
+)
+from hazardhunt.testers.spaces import play_in_space
 from hazardhunt.world.geometry import point_in_body_frame, point_rectangle_clearance
 
 
@@ -29,7 +37,7 @@ def outline_clearance(sim, point):
 def test_a_human_aimed_at_the_robot_walks_into_it_where_it_aims(sim):
     faces = {}
     for bearing in (0.0, -0.5, 1.0):
-        result = play_aimed(sim, np.tile([1.0, bearing, -1.0], (sim.horizon, 1)), False)
+        result = play_in_space(sim, np.tile([1.0, bearing, -1.0], (sim.horizon, 1)), "aim", False)
         assert result.summary.outcome == "failure"
         faces[bearing] = result.summary.contact_face
     # Ahead and from behind it meets the robot coming at it; aimed at its right, its right.
@@ -47,7 +55,7 @@ def test_the_aim_point_lies_the_stand_off_away_from_the_outline(sim):
 
 def test_a_human_aimed_at_a_distance_keeps_it(sim):
     # Aimed 3 m to the robot's right, the human comes up and walks beside it to the goal.
-    result = play_aimed(sim, np.tile([1.0, -0.5, 1.0], (sim.horizon, 1)), True)
+    result = play_in_space(sim, np.tile([1.0, -0.5, 1.0], (sim.horizon, 1)), "aim", True)
     assert result.summary.outcome == "goal"
     assert result.trajectory is not None
     assert min(s.clearance for s in result.trajectory if s.time >= 2.0) > 2.0
@@ -73,8 +81,42 @@ def test_the_slowest_aim_stands_and_turns_to_face_the_point(sim):
 def test_an_aimed_episode_replays_from_the_actions_it_records():
     sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
     aims = np.random.default_rng(0).uniform(-1.0, 1.0, (sim.horizon, 3))
-    for clear_path in (False, True):
-        result = play_aimed(sim, aims, False, clear_path)
+    for space, clear_path in [("aim", False), ("aim", True), ("route", False), ("route", True)]:
+        result = play_in_space(sim, aims, space, False, clear_path)
         replayed = sim.simulate(result.actions, keep_trajectory=False)
         assert replayed.summary == result.summary
         np.testing.assert_array_equal(replayed.actions, result.actions)
+
+
+def test_a_route_point_lies_beside_the_route_at_its_share(sim):
+    start, goal = sim.route.points[0], sim.route.points[-1]
+    np.testing.assert_allclose(route_point(sim, 0.0, 0.0), start)
+    np.testing.assert_allclose(route_point(sim, 1.0, 0.0), goal)
+    # The built-in routes run east: positive offsets lie to the north (the robot's left).
+    np.testing.assert_allclose(
+        route_point(sim, 0.5, ROUTE_OFFSET_MAX), (start + goal) / 2 + [0.0, ROUTE_OFFSET_MAX]
+    )
+
+
+def test_a_human_sent_onto_the_route_waits_there_and_the_robot_runs_into_it(sim):
+    # Three quarters along the route, on its centre line: the route follower, which ignores
+    # the human, hits it standing, late in its mission.
+    result = play_in_space(sim, np.tile([1.0, 0.5, 0.0], (sim.horizon, 1)), "route", True)
+    summary = result.summary
+    assert summary.outcome == "failure"
+    assert summary.contact_face == "front"
+    assert result.trajectory is not None
+    waiting = result.trajectory[-1]
+    np.testing.assert_allclose(
+        [waiting.human_x, waiting.human_y], route_point(sim, 0.75, 0.0), atol=0.05
+    )
+    assert summary.closest_human_speed < 0.1  # standing
+    # The robot's front met it: its centre was half a robot short of the point.
+    half_length = sim.robot_params.length / 2 + sim.human_params.radius
+    assert summary.closest_route_share == pytest.approx(
+        0.75 - half_length / sim.route.length, abs=0.02
+    )
+    assert list(measures_of(summary, ["route_share", "human_speed"])) == [
+        summary.closest_route_share,
+        summary.closest_human_speed,
+    ]

@@ -12,9 +12,10 @@ from hazardhunt.campaign.config import ConfigError, RunConfig, load_campaign
 from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
 from hazardhunt.env.agv import AGVEnv
-from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES
+from hazardhunt.spec.descriptors import descriptor_distance
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.ppo import NOVELTY_CAP, NoveltyBonus
+from hazardhunt.testers.qd import DEFAULT_MEASURES
 from tests.helpers import run_tables
 
 RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.json").read_text())
@@ -24,7 +25,7 @@ def test_the_qd_archive_is_kept_with_its_measures(seeded_run):
     run = seeded_run("qd", 0)
     archive = pd.read_parquet(run / "tester" / "archive.parquet")
     assert len(archive) > 3  # cells of different mechanisms
-    assert set(DESCRIPTOR_NAMES) <= set(archive.columns)
+    assert set(DEFAULT_MEASURES) <= set(archive.columns)
     assert archive["bearing"].between(-np.pi, np.pi).all()
     episodes = pd.read_parquet(run / "episodes.parquet")
     # Every cell holds the best episode that fell into it: no cell beats the best episode.
@@ -52,7 +53,8 @@ def test_a_budget_that_ends_within_a_batch_is_spent_exactly(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "played", [{}, {"clear_path": True}, {"aim": True}, {"aim": True, "clear_path": True}]
+    "played",
+    [{}, {"clear_path": True}, {"space": "aim"}, {"space": "mixed", "clear_path": True}],
 )
 def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
     def run(workers):
@@ -77,7 +79,8 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("qd", {"algorithm": "nsga"}, "algorithm: must be one of cma-me, cma-mae, map-elites"),
         ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
         ("qd", {"clear_path": "yes"}, "clear_path: must be true or false, not 'yes'"),
-        ("cem", {"aim": 1}, "aim: must be true or false, not 1"),
+        ("cem", {"space": "sideways"}, "space: must be one of open, aim, route, mixed, not"),
+        ("qd", {"aim": True}, "aim: unknown parameter"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
 )
@@ -122,12 +125,14 @@ def test_qd_with_a_diagonal_covariance_searches_and_says_so(tmp_path):
     assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
 
 
-def test_qd_over_aimed_decisions_finds_failures_that_replay_from_their_actions(tmp_path):
+@pytest.mark.parametrize("space", ["aim", "mixed"])
+def test_qd_over_closed_loop_decisions_finds_failures_that_replay_from_their_actions(
+    space, tmp_path
+):
     directory = tmp_path / "run"
-    assert (
-        head_on_run(directory, "qd", {"aim": True, "batch_size": 4}, episodes=16)["episodes"] == 16
-    )
-    assert json.loads((directory / "tester" / "qd.json").read_text())["aim"] is True
+    params = {"space": space, "batch_size": 4, "emitters": 3}
+    assert head_on_run(directory, "qd", params, episodes=24)["episodes"] == 24
+    assert json.loads((directory / "tester" / "qd.json").read_text())["space"] == space
     failures = pd.read_parquet(directory / "failures.parquet")
     assert len(failures) > 0
     for episode in failures["episode"]:
@@ -151,3 +156,11 @@ def test_the_novelty_bonus_pays_for_a_new_failure_not_for_the_same_one_again():
     # The first failure is as novel as can be; the same failure again earns nothing.
     assert bonuses[0] == pytest.approx(100.0 * NOVELTY_CAP, rel=1e-6)
     assert bonuses[1] == pytest.approx(0.0, abs=1e-4)
+
+
+def test_a_standing_and_a_walking_failure_at_the_same_place_are_different_mechanisms():
+    walking = np.array([1.5, 0.8, 0.0, 1.4])  # bearing, robot speed, stop history, human speed
+    standing = np.array([1.5, 0.8, 0.0, 0.0])
+    faster = np.array([1.5, 0.8, 0.0, 1.5])
+    assert descriptor_distance(walking, standing) == pytest.approx(1.0)
+    assert descriptor_distance(walking, faster) == 0.0  # walking, however fast

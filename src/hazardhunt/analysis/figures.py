@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -254,16 +255,40 @@ def _count(number: int, one: str, many: str = "") -> str:
     return f"{number} {one if number == 1 else many or one + 's'}"
 
 
+ARCHIVE_AXES: dict[str, tuple[str, float, float, int]] = {
+    "bearing": ("bearing around the robot (deg; 0 ahead, 90 left)", -180.0, 180.0, 12),
+    "robot_speed": ("robot speed (m/s)", 0.0, 1.2, 6),
+    "emergency_stop": ("safety layer (0 never stopped, 1 holding, 2 released)", -0.5, 2.5, 3),
+    "route_share": ("robot's share of its route (0 start, 1 goal)", 0.0, 1.0, 5),
+    "human_speed": ("human speed (m/s)", 0.0, 1.5, 6),
+}
+"""Per archive measure: its axis label, the range drawn (widened to the values) and its cells."""
+
+
+def _archive_axis(archive: pd.DataFrame, name: str | None) -> tuple[str, Any, Any]:
+    """An axis of the heat map: its label, its cell edges and each cell's values on it."""
+    if name is None:
+        return "", np.array([0.0, 1.0]), np.zeros(len(archive))
+    label, low, high, cells = ARCHIVE_AXES.get(name, (name, 0.0, 1.0, 6))
+    values = archive[name].to_numpy(dtype=float)
+    if name == "bearing":
+        values = np.degrees(values)
+    if len(values):
+        low, high = min(low, float(values.min())), max(high, float(values.max()))
+    return label, np.linspace(low, high, cells + 1), values
+
+
 def archive_heat_map(archive: pd.DataFrame, path: Path, title: str) -> Path:
-    """A quality-diversity archive (``tester/archive.parquet``) as a heat map over the bearing
-    of the contact or closest approach and the robot's speed there: each cell the best episode's
-    maximum risk over the archive's other axes; cells holding a failure (risk >= 100) framed."""
-    bearing_edges = np.linspace(-180.0, 180.0, 13)
-    speed_edges = np.linspace(0.0, max(1.2, float(archive["robot_speed"].max())), 7)
+    """A quality-diversity archive (``tester/archive.parquet``) as a heat map over its first two
+    measures (by default the bearing of the contact or closest approach and the robot's speed
+    there): each cell the best episode's maximum risk over the archive's other axes; cells
+    holding a failure (risk >= 100) framed."""
+    measures = [c for c in archive.columns if c not in ("index", "objective")]
+    x_label, bearing_edges, x_values = _archive_axis(archive, measures[0])
+    y_label, speed_edges, y_values = _archive_axis(archive, (measures[1:] or [None])[0])
     best = np.full((len(speed_edges) - 1, len(bearing_edges) - 1), np.nan)
-    degrees = np.degrees(archive["bearing"].to_numpy())
-    columns = np.clip(np.digitize(degrees, bearing_edges) - 1, 0, best.shape[1] - 1)
-    rows = np.clip(np.digitize(archive["robot_speed"], speed_edges) - 1, 0, best.shape[0] - 1)
+    columns = np.clip(np.digitize(x_values, bearing_edges) - 1, 0, best.shape[1] - 1)
+    rows = np.clip(np.digitize(y_values, speed_edges) - 1, 0, best.shape[0] - 1)
     for row, column, objective in zip(rows, columns, archive["objective"], strict=True):
         best[row, column] = np.fmax(best[row, column], objective)
     figure = Figure(figsize=(7.0, 3.4), dpi=100)
@@ -284,7 +309,7 @@ def archive_heat_map(archive: pd.DataFrame, path: Path, title: str) -> Path:
             )
         )
     figure.colorbar(shown, ax=ax, label="log10 of the maximum risk")
-    ax.set_xlabel("bearing around the robot (deg; 0 ahead, 90 left)")
-    ax.set_ylabel("robot speed (m/s)")
+    ax.set_xlabel(x_label)
+    ax.set_ylabel(y_label)
     ax.set_title(title, fontsize=9)
     return _save(figure, path)

@@ -333,10 +333,11 @@ def _archives(report: _Report, results: Results) -> None:
         return
     section = report.section(
         "Quality-diversity archives",
-        "The archive each quality-diversity run kept (docs/search-methods.md): for every "
-        "bearing of the contact or closest approach around the robot and every robot speed "
-        "there, the largest risk an episode reached (over the archive's other axes); framed "
-        "cells hold a failure. Empty cells were never reached.",
+        "The archive each quality-diversity run kept (docs/search-methods.md), over its "
+        "first two measures (by default the bearing of the contact or closest approach "
+        "around the robot and the robot's speed there): in every cell the largest risk an "
+        "episode reached (over the archive's other axes); framed cells hold a failure. Empty "
+        "cells were never reached.",
     )
     for run_id, path in archives:
         picture = figures.archive_heat_map(

@@ -258,7 +258,11 @@ class Simulation:
         self._stop_steps = 0
         self._failed_in_a_row = 0
         self._sut_error = False
-        self._counts = _EpisodeCounts(self.clearance, math.atan2(left, forward))
+        self._counts = _EpisodeCounts(
+            self.clearance,
+            math.atan2(left, forward),
+            closest_robot_position=(self.robot.x, self.robot.y),
+        )
         self._actions: list[NDArray[np.float32]] = []
         self._risks: list[float] = []
         self._samples: list[tuple[Any, ...]] = []
@@ -471,7 +475,12 @@ class Simulation:
         counts.add(step_risk, face if contact else None, verdict)
         if self.clearance < counts.min_clearance or contact:
             counts.closest(
-                self.clearance, math.atan2(left, forward), robot.speed, self._stop_state()
+                self.clearance,
+                math.atan2(left, forward),
+                robot.speed,
+                self._stop_state(),
+                (robot.x, robot.y),
+                self._human_velocity,
             )
         return self.outcome
 
@@ -587,6 +596,8 @@ class Simulation:
             closest_bearing=counts.closest_bearing,
             closest_robot_speed=counts.closest_robot_speed,
             closest_emergency_stop=counts.closest_emergency_stop,
+            closest_route_share=self._route_share(counts.closest_robot_position),
+            closest_human_speed=math.hypot(*counts.closest_human_velocity),
             emergency_stops=counts.emergency_stops,
             time_in_field=counts.field_steps * self.physics_step,
             controller_calls=counts.controller_calls,
@@ -594,6 +605,11 @@ class Simulation:
             controller_errors=tuple(counts.controller_errors),
             safety_layer_errors=tuple(counts.safety_layer_errors),
         )
+
+    def _route_share(self, position: tuple[float, float]) -> float:
+        """The share of the route's length from its start to the route point nearest
+        ``position``."""
+        return self.route.project(np.asarray(position)) / max(self.route.length, 1e-12)
 
     def timing(self) -> EpisodeTiming:
         """Wall-clock time of the episode so far and of the controller's solves."""
@@ -637,6 +653,8 @@ class _EpisodeCounts:
     closest_bearing: float
     closest_robot_speed: float = 0.0
     closest_emergency_stop: str = "never"
+    closest_robot_position: tuple[float, float] = (0.0, 0.0)
+    closest_human_velocity: tuple[float, float] = (0.0, 0.0)
     risk_sum: float = 0.0
     max_risk: float = 0.0
     contact_face: str | None = None
@@ -655,11 +673,20 @@ class _EpisodeCounts:
         if face is not None:
             self.contact_face, self.contact_verdict = face, verdict
 
-    def closest(self, clearance: float, bearing: float, robot_speed: float, stop: str) -> None:
+    def closest(
+        self,
+        clearance: float,
+        bearing: float,
+        robot_speed: float,
+        stop: str,
+        robot_position: tuple[float, float],
+        human_velocity: tuple[float, float],
+    ) -> None:
         """The human is as close as ever (or touches): remember where, and how things stood."""
         self.min_clearance = min(self.min_clearance, clearance)
         self.closest_bearing, self.closest_robot_speed = bearing, robot_speed
         self.closest_emergency_stop = stop
+        self.closest_robot_position, self.closest_human_velocity = robot_position, human_velocity
 
 
 class PeriodError(ValueError):

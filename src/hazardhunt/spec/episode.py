@@ -50,6 +50,11 @@ class EpisodeSummary:
     closest_emergency_stop: str = "never"
     """The safety layer's history then: the stop had ``never`` triggered, was ``holding``, or
     had been ``released``."""
+    closest_route_share: float = 0.0
+    """How far along its route the robot was then: the share of the route's length from its
+    start to the route point nearest the robot (0 at the start, 1 at the goal)."""
+    closest_human_speed: float = 0.0
+    """The human's speed then (over the last physics step), in m/s."""
     emergency_stops: int = 0
     """Emergency stops the safety layer triggered."""
     time_in_field: float = 0.0

@@ -1,4 +1,4 @@
-"""Decisions aimed at the robot: a search space in which each decision says where to go around it.
+"""Decisions aimed at the robot or at its route: search spaces in which a decision says where to go.
 
 An open-loop sequence of (speed, turn rate) decisions reaches the robot only where the robot
 happens to be when the sequence is played; most of a search over such sequences is spent on
@@ -14,28 +14,36 @@ While played, each decision becomes the (speed, turn rate) action whose arc over
 period ends nearest that point, with the robot's motion extrapolated over the period from its
 current speed and turn rate; the human slows down rather than overshoot. A sequence can so
 follow the robot, wait beside it, step back out of its field and come back in, which is how the
-failures behind a safety layer happen. The actions played are what the episode records, so it
-replays exactly without this module.
+failures behind a safety layer happen.
+
+A route decision (the ``route`` space) names a point beside the robot's route instead, three
+numbers as well: the speed, how far along the route (-1 its start, 1 its goal) and how far
+beside it (+-1: ``ROUTE_OFFSET_MAX`` to the left or right). The human walks there and waits,
+which is how it stands in the robot's way, or waits where the robot will be late in its
+mission (docking at the goal, say) without making it stop on the way.
+
+The actions played are what the episode records, so it replays exactly without this module.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from hazardhunt.sim.simulation import EpisodeResult, Simulation
-from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.clear_path import clear_action, human_path, play_decisions
+from hazardhunt.sim.simulation import Simulation
+from hazardhunt.testers.clear_path import human_path
 
 AIM_SIZE = 3
 """Numbers per aimed decision: speed, bearing, stand-off."""
 
 STANDOFF_MAX = 3.0
 """The farthest a decision aims from the robot's outline, in m."""
+
+ROUTE_OFFSET_MAX = 3.0
+"""The farthest a route decision aims beside the robot's route, in m."""
 
 TURN_CHOICES = np.linspace(-1.0, 1.0, 17)
 """Normalised turn rates an aimed decision chooses from."""
@@ -66,6 +74,34 @@ def aimed_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDAr
     period, towards the point ``aim`` (speed, bearing, stand-off in [-1, 1]) names."""
     wanted_speed, bearing, standoff = np.clip(np.asarray(aim, dtype=np.float64), -1.0, 1.0)
     target = aim_point(simulation, math.pi * bearing, 0.5 * (standoff + 1.0) * STANDOFF_MAX)
+    return walk_towards(simulation, target, wanted_speed)
+
+
+def route_point(simulation: Simulation, along: float, offset: float) -> NDArray[np.float64]:
+    """The point ``offset`` (m, positive to the left) beside the robot's route, at the share
+    ``along`` (0 the start, 1 the goal) of the route's length."""
+    route = simulation.route
+    x, y, tangent_x, tangent_y = route.frame_at(along * route.length)
+    return np.array([x - offset * tangent_y, y + offset * tangent_x])
+
+
+def route_action(
+    simulation: Simulation, decision: NDArray[np.floating[Any]]
+) -> NDArray[np.float32]:
+    """The normalised (speed, turn rate) action that walks the human, over the next decision
+    period, towards the point of the robot's route ``decision`` (speed, share of the route,
+    offset beside it in [-1, 1]) names."""
+    wanted_speed, along, offset = np.clip(np.asarray(decision, dtype=np.float64), -1.0, 1.0)
+    target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
+    return walk_towards(simulation, target, wanted_speed)
+
+
+def walk_towards(
+    simulation: Simulation, target: NDArray[np.float64], wanted_speed: float
+) -> NDArray[np.float32]:
+    """The normalised action whose arc over the next decision period ends nearest ``target``,
+    at the normalised ``wanted_speed`` or slower where that would overshoot; standing, the
+    human turns to face the target."""
     human = simulation.human_params
     period = simulation.decision_period
     x, y, heading = simulation.human_pose
@@ -98,20 +134,3 @@ def _ray_to_clearance(half_length: float, half_width: float, bearing: float, gap
     # Through a corner: |t (u, v) - (half_length, half_width)| = gap.
     along = half_length * u + half_width * v
     return along + math.sqrt(along**2 - (half_length**2 + half_width**2 - gap**2))
-
-
-def play_aimed(
-    simulation: Simulation,
-    aims: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
-    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
-    clear_path: bool = False,
-) -> EpisodeResult:
-    """Play one episode from the scenario's start, each of ``aims`` turned into an action
-    (:func:`aimed_action`) at the moment it is played, and made clear of walls and shelves
-    (:func:`~hazardhunt.testers.clear_path.clear_action`) when ``clear_path`` says so."""
-
-    def to_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
-        action = aimed_action(simulation, aim)
-        return clear_action(simulation, action) if clear_path else action
-
-    return play_decisions(simulation, aims, to_action, keep_trajectory)

@@ -17,8 +17,7 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.aim import play_aimed
-from hazardhunt.testers.clear_path import play_clear
+from hazardhunt.testers.spaces import play_in_space
 
 MAX_WORKER_PROCESSES = 64
 """The most worker processes one run's tester may start (PPO's ``n_envs``, the searchers'
@@ -144,27 +143,26 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         sequences: Sequence[NDArray[np.floating[Any]]],
         workers: int = 1,
         clear_path: bool = False,
-        aim: bool = False,
+        space: str = "open",
     ) -> list[EpisodeResult]:
-        """Play open-loop action sequences and record them, in order, as the run's next episodes.
+        """Play whole episodes' decisions and record them, in order, as the run's next episodes.
 
         Args:
-            sequences: Each up to :attr:`horizon` normalised actions, or with ``aim`` as many
-                aimed decisions (:mod:`hazardhunt.testers.aim`).
+            sequences: Each up to :attr:`horizon` decisions in ``space``: normalised actions
+                played open loop by default.
             workers: Worker processes that play the batch at once, each with its own copy of
                 the simulation (kept for the recorder's life); 1 plays it here. The results do
                 not depend on it: every episode is deterministic.
             clear_path: Whether each action that would walk the human into a static obstacle
                 is replaced by the nearest one that does not, as it is played
                 (:func:`~hazardhunt.testers.clear_path.clear_action`).
-            aim: Whether each decision is aimed at the robot (speed, bearing, stand-off) and
-                turned into an action as it is played
-                (:func:`~hazardhunt.testers.aim.aimed_action`).
+            space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`):
+                ``open``, ``aim`` or ``route``.
         """
         arrays = [np.asarray(a) for a in sequences]
         if workers <= 1 or len(arrays) <= 1:
             keep = self.keep_trajectory
-            results = [_play(self.simulation, a, keep, clear_path, aim) for a in arrays]
+            results = [play_in_space(self.simulation, a, space, keep, clear_path) for a in arrays]
         else:
             if self._pool is None or self._pool_size != workers:
                 self.close_pool()
@@ -173,7 +171,7 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
                 self._pool_size = workers
             count = len(arrays)
             results = list(
-                self._pool.map(_play_in_worker, arrays, [clear_path] * count, [aim] * count)
+                self._pool.map(_play_in_worker, arrays, [clear_path] * count, [space] * count)
             )
         for result in results:
             self.record(result)
@@ -248,25 +246,11 @@ def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], boo
 
 
 def _play_in_worker(
-    actions: NDArray[np.floating[Any]], clear_path: bool, aim: bool
+    decisions: NDArray[np.floating[Any]], clear_path: bool, space: str
 ) -> EpisodeResult:
     assert _worker_simulation is not None, "the worker was not started with a simulation"
     simulation, keep = _worker_simulation
-    return _play(simulation, actions, keep, clear_path, aim)
-
-
-def _play(
-    simulation: Simulation,
-    actions: NDArray[np.floating[Any]],
-    keep: Callable[[EpisodeSummary], bool],
-    clear_path: bool,
-    aim: bool,
-) -> EpisodeResult:
-    if aim:
-        return play_aimed(simulation, actions, keep, clear_path)
-    if clear_path:
-        return play_clear(simulation, actions, keep)
-    return simulation.simulate(actions, keep)
+    return play_in_space(simulation, decisions, space, keep, clear_path)
 
 
 def reward_of(tester: Tester) -> RewardKind:

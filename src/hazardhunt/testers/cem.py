@@ -17,21 +17,25 @@ from a fresh random mean, away from the mechanisms it already has.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.aim import AIM_SIZE
 from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
 
 MAX_POPULATION = 10_000
 """The largest batch: the weights of its elites are kept in memory from the start."""
 
 COLLISION_SCORE = 100.0
 """The score of a failure that repeats a known mechanism; a new one scores up to twice it."""
+
+SPACE_CHOICES = (*SPACES, "mixed")
+"""The values of ``space``: one search space, or all of them taking turns."""
 
 
 class CrossEntropyTester:
@@ -51,7 +55,7 @@ class CrossEntropyTester:
         novelty_radius: float = 0.4,
         n_workers: int = 1,
         clear_path: bool = False,
-        aim: bool = False,
+        space: str = "open",
     ) -> None:
         """Args:
         seed: Seeds the sampling.
@@ -67,9 +71,10 @@ class CrossEntropyTester:
         n_workers: Processes that play each batch (1: in the run's own process).
         clear_path: Whether an action that would walk the human into a wall or shelf is
             played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
-        aim: Whether each decision is aimed at the robot (speed, bearing around it, stand-off:
-            three numbers, :mod:`hazardhunt.testers.aim`) instead of an open-loop (speed, turn
-            rate).
+        space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`): ``open``
+            (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
+            or ``mixed``: one Gaussian per space, their batches taking turns, the failures
+            found in one space scoring the others' as known.
 
         Raises:
             TesterParameterError: A parameter out of its range.
@@ -92,7 +97,7 @@ class CrossEntropyTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
-            "aim": (aim, "true or false", isinstance(aim, bool)),
+            "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -107,19 +112,26 @@ class CrossEntropyTester:
         self.novelty_radius = novelty_radius
         self.n_workers = n_workers
         self.clear_path = clear_path
-        self.aim = aim
+        self.space = space
         self.restarts = 0
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         rng = np.random.default_rng(self.seed)
-        shape = (env.horizon, AIM_SIZE if self.aim else 2)
-        mean, std = np.zeros(shape), np.full(shape, self.initial_std)
+        spaces = SPACES if self.space == "mixed" else (self.space,)
+        shapes = {space: (env.horizon, DECISION_SIZES[space]) for space in spaces}
+        searches = {
+            space: _Search(np.zeros(shape), np.full(shape, self.initial_std))
+            for space, shape in shapes.items()
+        }
         archive = FailureArchive(neighbours=1)
-        stale = 0
+        turn = 0
         while env.episodes_done < episodes:
+            space = spaces[turn % len(spaces)]
+            search, shape, turn = searches[space], shapes[space], turn + 1
             count = min(self.population, episodes - env.episodes_done)
-            samples = np.clip(mean + std * rng.standard_normal((count, *shape)), -1.0, 1.0)
-            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, self.aim)
+            noise = rng.standard_normal((count, *shape))
+            samples = np.clip(search.mean + search.std * noise, -1.0, 1.0)
+            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, space)
             if env.episodes_done >= episodes:
                 break  # the budget is spent: nothing left to refit the Gaussian for
             scores, novel = self._scores([r.summary for r in results], archive)
@@ -127,13 +139,14 @@ class CrossEntropyTester:
             elite = samples[np.argsort(scores, kind="stable")[::-1][: self.elites]]
             elite_mean = np.tensordot(self.weights, elite, axes=1)
             elite_std = np.sqrt(np.tensordot(self.weights, (elite - elite_mean) ** 2, axes=1))
-            mean = self.smoothing * elite_mean + (1 - self.smoothing) * mean
-            std = self.smoothing * elite_std + (1 - self.smoothing) * std
-            stale = 0 if novel else stale + 1
-            if std.mean() < self.min_std or stale >= self.patience:
+            search.mean = self.smoothing * elite_mean + (1 - self.smoothing) * search.mean
+            search.std = self.smoothing * elite_std + (1 - self.smoothing) * search.std
+            search.stale = 0 if novel else search.stale + 1
+            if search.std.mean() < self.min_std or search.stale >= self.patience:
                 # Away from what it has: a fresh mean, and known failures score less.
-                mean, std = rng.uniform(-0.6, 0.6, shape), np.full(shape, self.initial_std)
-                stale, self.restarts = 0, self.restarts + 1
+                search.mean = rng.uniform(-0.6, 0.6, shape)
+                search.std, search.stale = np.full(shape, self.initial_std), 0
+                self.restarts += 1
 
     def _scores(
         self, summaries: list[EpisodeSummary], archive: FailureArchive
@@ -164,7 +177,17 @@ class CrossEntropyTester:
             "patience": self.patience,
             "novelty_radius": self.novelty_radius,
             "clear_path": self.clear_path,
-            "aim": self.aim,
+            "space": self.space,
             "restarts": self.restarts,
         }
         (directory / "cem.json").write_text(json.dumps(settings, indent=2) + "\n")
+
+
+@dataclass
+class _Search:
+    """One Gaussian over a search space's decision sequences, and how long it found nothing
+    new."""
+
+    mean: NDArray[np.float64]
+    std: NDArray[np.float64]
+    stale: int = 0

@@ -91,13 +91,3 @@ def play_decisions(
         if simulation.decide(to_action(simulation, np.asarray(decision))).outcome is not None:
             break
     return simulation.result(keep_trajectory)
-
-
-def play_clear(
-    simulation: Simulation,
-    actions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
-    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
-) -> EpisodeResult:
-    """Play one episode from the scenario's start, each of ``actions`` made clear
-    (:func:`clear_action`) at the moment it is played."""
-    return play_decisions(simulation, actions, clear_action, keep_trajectory)

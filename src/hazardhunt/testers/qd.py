@@ -23,15 +23,17 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
-from hazardhunt.spec.descriptors import DESCRIPTOR_NAMES, describe
-from hazardhunt.testers.aim import AIM_SIZE
+from hazardhunt.sim.simulation import EpisodeResult
+from hazardhunt.spec.descriptors import MEASURE_NAMES, measures_of
 from hazardhunt.testers.base import (
     MAX_WORKER_PROCESSES,
     EpisodeRecorder,
     TesterParameterError,
     check_parameters,
 )
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
 
@@ -44,6 +46,10 @@ MAX_BATCH = 10_000
 EVOLUTION_STRATEGIES = ("cma_es", "sep_cma_es", "lm_ma_es")
 """The emitters' evolution strategies (pyribs' names): full covariance, diagonal, limited
 memory."""
+DEFAULT_MEASURES = ("bearing", "robot_speed", "emergency_stop")
+"""The archive's axes unless ``measures`` says otherwise."""
+SPACE_CHOICES = (*SPACES, "mixed")
+"""The values of ``space``: one search space, or the emitters taking them in turn."""
 MAX_STATE_BYTES = 2 * 1024**3
 """The most memory the emitters' states and the archive may take; beyond it a run is refused
 before it starts rather than killed for memory once it has."""
@@ -57,7 +63,7 @@ class QualityDiversityTester:
     def __init__(
         self,
         seed: int,
-        measures: Sequence[str] = DESCRIPTOR_NAMES,
+        measures: Sequence[str] = DEFAULT_MEASURES,
         bins: Sequence[int] = (8, 3, 3),
         algorithm: str = "cma-me",
         emitters: int = 2,
@@ -67,12 +73,13 @@ class QualityDiversityTester:
         es: str = "cma_es",
         n_workers: int = 1,
         clear_path: bool = False,
-        aim: bool = False,
+        space: str = "open",
     ) -> None:
         """Args:
         seed: Seeds the archive and the emitters.
-        measures: The descriptor entries that span the archive (of ``bearing``,
-            ``robot_speed``, ``emergency_stop``).
+        measures: The entries that span the archive (of ``bearing``, ``robot_speed``,
+            ``emergency_stop``, ``route_share``, ``human_speed``;
+            :mod:`hazardhunt.spec.descriptors`).
         bins: Cells along each measure.
         algorithm: ``cma-me``, ``cma-mae``, or ``map-elites`` (Gaussian mutation of archive
             elites, started from uniformly random sequences).
@@ -87,20 +94,21 @@ class QualityDiversityTester:
         n_workers: Processes that play each batch (1: in the run's own process).
         clear_path: Whether an action that would walk the human into a wall or shelf is
             played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
-        aim: Whether each decision is aimed at the robot (speed, bearing around it, stand-off:
-            three numbers, :mod:`hazardhunt.testers.aim`) instead of an open-loop (speed, turn
-            rate).
+        space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`): ``open``
+            (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
+            or ``mixed``: the emitters take the spaces in turn (the first ``open``, the
+            second ``aim``, the third ``route``, ...) and fill one archive.
 
         Raises:
             TesterParameterError: An unknown measure or algorithm, or a setting out of its
                 range.
         """
         measures, bins = list(measures), list(bins)
-        known = set(measures) <= set(DESCRIPTOR_NAMES)
+        known = set(measures) <= set(MEASURE_NAMES)
         checks = {
             "measures": (
                 measures,
-                f"distinct names of {', '.join(DESCRIPTOR_NAMES)}",
+                f"distinct names of {', '.join(MEASURE_NAMES)}",
                 known and len(set(measures)) == len(measures) > 0,
             ),
             "bins": (
@@ -122,7 +130,7 @@ class QualityDiversityTester:
                 1 <= n_workers <= MAX_WORKER_PROCESSES,
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
-            "aim": (aim, "true or false", isinstance(aim, bool)),
+            "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -136,27 +144,42 @@ class QualityDiversityTester:
         self.es = es
         self.n_workers = n_workers
         self.clear_path = clear_path
-        self.aim = aim
-        self.decision_size = AIM_SIZE if aim else 2
-        """Numbers per decision in a searched sequence."""
+        self.space = space
+        self.decision_size = (
+            max(DECISION_SIZES.values()) if space == "mixed" else DECISION_SIZES[space]
+        )
+        """Numbers per decision in a searched sequence (an open-loop decision of ``mixed``
+        reads the first two)."""
         self.archive: Any = None
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         scheduler = self._scheduler(env)
-        columns = [DESCRIPTOR_NAMES.index(m) for m in self.measures]
-        horizon = env.horizon
         while env.episodes_done < episodes:
             solutions = scheduler.ask()
             left = episodes - env.episodes_done
-            sequences = solutions[:left].reshape(-1, horizon, self.decision_size)
-            results = env.evaluate_batch(list(sequences), self.n_workers, self.clear_path, self.aim)
+            results = self._play(env, solutions[:left])
             objective = [result.summary.max_risk for result in results]
-            measures = [describe(result.summary)[columns] for result in results]
+            measures = [measures_of(result.summary, self.measures) for result in results]
             if len(results) < len(solutions):
                 # The budget ends within this batch: the archive keeps what it played.
                 self.archive.add(solutions[: len(results)], objective, measures)
                 break
             scheduler.tell(objective, measures)
+
+    def _play(self, env: EpisodeRecorder, solutions: NDArray[np.float64]) -> list[EpisodeResult]:
+        """Play the emitters' solutions, in order, each emitter's batch in its space."""
+        if self.space != "mixed":
+            decisions = solutions.reshape(len(solutions), env.horizon, self.decision_size)
+            return env.evaluate_batch(list(decisions), self.n_workers, self.clear_path, self.space)
+        results: list[EpisodeResult] = []
+        for start in range(0, len(solutions), self.batch_size):
+            emitter = start // self.batch_size
+            space = SPACES[emitter % len(SPACES)] if self.space == "mixed" else self.space
+            batch = solutions[start : start + self.batch_size]
+            decisions = batch.reshape(len(batch), env.horizon, self.decision_size)
+            decisions = decisions[:, :, : DECISION_SIZES[space]]
+            results += env.evaluate_batch(list(decisions), self.n_workers, self.clear_path, space)
+        return results
 
     def _scheduler(self, env: EpisodeRecorder) -> Any:
         from ribs.archives import GridArchive
@@ -167,6 +190,8 @@ class QualityDiversityTester:
             "bearing": (-np.pi, np.pi),
             "robot_speed": (0.0, env.simulation.robot_params.max_speed),
             "emergency_stop": (-0.5, 2.5),
+            "route_share": (0.0, 1.0),
+            "human_speed": (0.0, env.simulation.human_params.max_speed),
         }
         dimension = env.horizon * self.decision_size
         self.check_horizon(env.horizon)
@@ -272,6 +297,6 @@ class QualityDiversityTester:
             "learning_rate": self.learning_rate,
             "es": self.es,
             "clear_path": self.clear_path,
-            "aim": self.aim,
+            "space": self.space,
         }
         (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")

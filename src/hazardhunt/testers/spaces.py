@@ -1,0 +1,65 @@
+"""The search spaces of the episode-level testers: what the numbers of one decision mean.
+
+An episode-level searcher proposes a whole episode before it is played, as ``horizon``
+decisions of a few numbers in [-1, 1] each. How a decision becomes the human's action is the
+search space:
+
+- ``open``: the decision is the action itself, (speed, turn rate), played open loop;
+- ``aim``: (speed, bearing around the robot, stand-off from its outline), aimed at the robot
+  where it is when the decision is played (:func:`~hazardhunt.testers.aim.aimed_action`);
+- ``route``: (speed, share of the robot's route, offset beside it), a walk to a point of the
+  robot's route and a wait there (:func:`~hazardhunt.testers.aim.route_action`).
+
+Every space plays the actions it chooses, and the episode records those, so an episode
+replays exactly without knowing its space. ``clear_path`` makes any of them keep the human
+clear of walls and shelves (:func:`~hazardhunt.testers.clear_path.clear_action`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.spec.episode import EpisodeSummary
+from hazardhunt.testers.aim import aimed_action, route_action
+from hazardhunt.testers.clear_path import clear_action, play_decisions
+
+ToAction = Callable[[Simulation, NDArray[np.floating[Any]]], NDArray[np.float32]]
+
+CLOSED_LOOP: dict[str, ToAction] = {"aim": aimed_action, "route": route_action}
+"""The spaces whose decisions are turned into actions while they are played."""
+
+DECISION_SIZES = {"open": 2, "aim": 3, "route": 3}
+"""Numbers per decision in each search space."""
+
+SPACES = tuple(DECISION_SIZES)
+"""The search spaces' names."""
+
+
+def play_in_space(
+    simulation: Simulation,
+    decisions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
+    space: str,
+    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
+    clear_path: bool = False,
+) -> EpisodeResult:
+    """Play one episode from the scenario's start, each decision read in ``space``.
+
+    Raises:
+        ValueError: An unknown space.
+    """
+    if space not in DECISION_SIZES:
+        raise ValueError(f"unknown search space {space!r}: one of {', '.join(SPACES)}")
+    if space == "open" and not clear_path:
+        return simulation.simulate(decisions, keep_trajectory)
+    steer = CLOSED_LOOP.get(space)
+
+    def to_action(simulation: Simulation, decision: NDArray[np.floating[Any]]) -> NDArray[Any]:
+        action = decision if steer is None else steer(simulation, decision)
+        return clear_action(simulation, action) if clear_path else np.asarray(action, np.float32)
+
+    return play_decisions(simulation, decisions, to_action, keep_trajectory)
