@@ -14,6 +14,7 @@ from hazardhunt.campaign.run import record_run
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.spec.descriptors import descriptor_distance
 from hazardhunt.testers import make_tester
+from hazardhunt.testers.cem import coloured_noise
 from hazardhunt.testers.ppo import NOVELTY_CAP, NoveltyBonus
 from hazardhunt.testers.qd import DEFAULT_MEASURES
 from tests.helpers import run_tables
@@ -80,6 +81,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
         ("qd", {"clear_path": "yes"}, "clear_path: must be true or false, not 'yes'"),
         ("cem", {"space": "sideways"}, "space: must be one of open, aim, route, mixed, not"),
+        ("cem", {"noise_exponent": -1}, "noise_exponent: must be a number from 0 to 4, not -1"),
         ("qd", {"aim": True}, "aim: unknown parameter"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
@@ -164,3 +166,21 @@ def test_a_standing_and_a_walking_failure_at_the_same_place_are_different_mechan
     faster = np.array([1.5, 0.8, 0.0, 1.5])
     assert descriptor_distance(walking, standing) == pytest.approx(1.0)
     assert descriptor_distance(walking, faster) == 0.0  # walking, however fast
+
+
+def test_coloured_noise_keeps_its_spread_and_smooths_the_sequences():
+    white = coloured_noise(np.random.default_rng(0), (2000, 15, 3), 0.0)
+    np.testing.assert_array_equal(white, np.random.default_rng(0).standard_normal((2000, 15, 3)))
+    for exponent in (1.0, 2.0):
+        noise = coloured_noise(np.random.default_rng(0), (2000, 15, 3), exponent)
+        assert noise.std(axis=0) == pytest.approx(np.ones((15, 3)), abs=0.08)
+        neighbours = np.mean(noise[:, 1:] * noise[:, :-1])
+        assert neighbours > 0.4  # one decision tells much about the next
+
+
+def test_cem_with_coloured_noise_searches_and_says_so(tmp_path):
+    directory = tmp_path / "run"
+    params = {"population": 6, "noise_exponent": 2, "space": "route"}
+    assert head_on_run(directory, "cem", params, episodes=12)["episodes"] == 12
+    settings = json.loads((directory / "tester" / "cem.json").read_text())
+    assert (settings["noise_exponent"], settings["space"]) == (2.0, "route")

@@ -56,6 +56,7 @@ class CrossEntropyTester:
         n_workers: int = 1,
         clear_path: bool = False,
         space: str = "open",
+        noise_exponent: float = 0.0,
     ) -> None:
         """Args:
         seed: Seeds the sampling.
@@ -75,6 +76,10 @@ class CrossEntropyTester:
             (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
             or ``mixed``: one Gaussian per space, their batches taking turns, the failures
             found in one space scoring the others' as known.
+        noise_exponent: How the sampling noise is correlated over an episode's decisions
+            (iCEM's coloured noise, Pinneri et al. 2020): 0 draws every decision
+            independently, larger exponents give smoother sequences (2: a random walk's
+            spectrum), in which a human keeps to one plan for longer.
 
         Raises:
             TesterParameterError: A parameter out of its range.
@@ -98,6 +103,13 @@ class CrossEntropyTester:
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
             "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
+            "noise_exponent": (
+                noise_exponent,
+                "a number from 0 to 4",
+                isinstance(noise_exponent, int | float)
+                and not isinstance(noise_exponent, bool)
+                and 0.0 <= noise_exponent <= 4.0,
+            ),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -113,6 +125,7 @@ class CrossEntropyTester:
         self.n_workers = n_workers
         self.clear_path = clear_path
         self.space = space
+        self.noise_exponent = float(noise_exponent)
         self.restarts = 0
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
@@ -129,7 +142,7 @@ class CrossEntropyTester:
             space = spaces[turn % len(spaces)]
             search, shape, turn = searches[space], shapes[space], turn + 1
             count = min(self.population, episodes - env.episodes_done)
-            noise = rng.standard_normal((count, *shape))
+            noise = coloured_noise(rng, (count, *shape), self.noise_exponent)
             samples = np.clip(search.mean + search.std * noise, -1.0, 1.0)
             results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, space)
             if env.episodes_done >= episodes:
@@ -178,9 +191,36 @@ class CrossEntropyTester:
             "novelty_radius": self.novelty_radius,
             "clear_path": self.clear_path,
             "space": self.space,
+            "noise_exponent": self.noise_exponent,
             "restarts": self.restarts,
         }
         (directory / "cem.json").write_text(json.dumps(settings, indent=2) + "\n")
+
+
+def coloured_noise(
+    rng: np.random.Generator, shape: tuple[int, ...], exponent: float
+) -> NDArray[np.float64]:
+    """Normal noise of ``shape`` (samples, decisions, numbers per decision), zero mean and unit
+    spread at every decision, whose power over the decisions falls with frequency f as
+    1 / f**exponent; exponent 0 is plain white noise. The lowest frequency, a constant over
+    the whole episode, gets the power of the next one. The noise is drawn over twice the
+    decisions and cut, so that the end of an episode is not tied to its start."""
+    if exponent == 0.0:
+        return rng.standard_normal(shape)
+    samples, decisions, numbers = shape
+    length = 2 * decisions
+    frequencies = np.fft.rfftfreq(length)
+    frequencies[0] = frequencies[1]
+    scale = frequencies ** (-exponent / 2.0)
+    # The spread each decision gets from unit normal real and imaginary parts of the spectrum.
+    basis = np.eye(len(frequencies))
+    spread = np.sqrt(
+        (np.fft.irfft(basis * scale, n=length) ** 2).sum(axis=0)
+        + (np.fft.irfft(1j * basis * scale, n=length) ** 2).sum(axis=0)
+    )[:decisions]
+    spectrum = rng.standard_normal((samples, numbers, len(frequencies), 2))
+    noise = np.fft.irfft(scale * (spectrum[..., 0] + 1j * spectrum[..., 1]), n=length)
+    return np.moveaxis(noise[..., :decisions] / spread, 1, 2)
 
 
 @dataclass
