@@ -145,12 +145,15 @@ class QualityDiversityTester:
         self.n_workers = n_workers
         self.clear_path = clear_path
         self.space = space
-        self.decision_size = (
-            max(DECISION_SIZES.values()) if space == "mixed" else DECISION_SIZES[space]
-        )
-        """Numbers per decision in a searched sequence (an open-loop decision of ``mixed``
-        reads the first two)."""
         self.archive: Any = None
+
+    @property
+    def decision_size(self) -> int:
+        """Numbers per decision in a searched sequence (with ``mixed`` the largest space's; an
+        open-loop decision reads the first two)."""
+        if self.space == "mixed":
+            return max(DECISION_SIZES.values())
+        return DECISION_SIZES[self.space]
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         scheduler = self._scheduler(env)
