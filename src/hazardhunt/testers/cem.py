@@ -26,16 +26,13 @@ from numpy.typing import NDArray
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES
 
 MAX_POPULATION = 10_000
 """The largest batch: the weights of its elites are kept in memory from the start."""
 
 COLLISION_SCORE = 100.0
 """The score of a failure that repeats a known mechanism; a new one scores up to twice it."""
-
-SPACE_CHOICES = (*SPACES, "mixed")
-"""The values of ``space``: one search space, or all of them taking turns."""
 
 
 class CrossEntropyTester:

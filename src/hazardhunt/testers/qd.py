@@ -33,7 +33,7 @@ from hazardhunt.testers.base import (
     TesterParameterError,
     check_parameters,
 )
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
 
@@ -48,8 +48,6 @@ EVOLUTION_STRATEGIES = ("cma_es", "sep_cma_es", "lm_ma_es")
 memory."""
 DEFAULT_MEASURES = ("bearing", "robot_speed", "emergency_stop")
 """The archive's axes unless ``measures`` says otherwise."""
-SPACE_CHOICES = (*SPACES, "mixed")
-"""The values of ``space``: one search space, or the emitters taking them in turn."""
 MAX_STATE_BYTES = 2 * 1024**3
 """The most memory the emitters' states and the archive may take; beyond it a run is refused
 before it starts rather than killed for memory once it has."""

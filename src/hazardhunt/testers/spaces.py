@@ -39,6 +39,9 @@ DECISION_SIZES = {"open": 2, "aim": 3, "route": 3}
 SPACES = tuple(DECISION_SIZES)
 """The search spaces' names."""
 
+SPACE_CHOICES = (*SPACES, "mixed")
+"""The values of a searcher's ``space``: one search space, or all of them in turn."""
+
 
 def play_in_space(
     simulation: Simulation,
