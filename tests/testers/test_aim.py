@@ -120,3 +120,21 @@ def test_a_human_sent_onto_the_route_waits_there_and_the_robot_runs_into_it(sim)
         summary.closest_route_share,
         summary.closest_human_speed,
     ]
+
+
+def test_with_clear_path_a_human_walks_round_a_shelf_to_its_route_point():
+    # In the crossing the human starts in the cross aisle south of the main aisle; the route's
+    # goal lies east, behind a shelf block. Walked straight at, the block stops the human at its
+    # corner; with clear_path it walks round the block and stands on the goal when the robot,
+    # which ignores it, arrives.
+    sim = Simulation.build("crossing", "none", controller=PursuitController())
+    goal = np.tile([1.0, 1.0, 0.0], (sim.horizon, 1))
+    walked = play_in_space(sim, goal, "route", True, clear_path=True)
+    assert walked.trajectory is not None
+    arrived = [s for s in walked.trajectory if math.hypot(s.human_x - 18.0, s.human_y - 10.0) < 0.1]
+    assert arrived, "the human never reached the goal"
+    assert arrived[0].time < 15.0
+    assert walked.summary.outcome == "failure"
+    assert walked.summary.contact_face == "front"
+    floor, radius = sim.scenario.floor, sim.human_params.radius
+    assert not any(floor.disc_blocked_at(s.human_x, s.human_y, radius) for s in walked.trajectory)

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from hazardhunt.campaign.config import ConfigError, RunConfig, load_campaign
+from hazardhunt.campaign.config import ConfigError, PluginSpec, RunConfig, load_campaign
 from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
 from hazardhunt.env.agv import AGVEnv
@@ -17,6 +17,7 @@ from hazardhunt.testers import make_tester
 from hazardhunt.testers.cem import coloured_noise
 from hazardhunt.testers.ppo import NOVELTY_CAP, NoveltyBonus
 from hazardhunt.testers.qd import DEFAULT_MEASURES
+from hazardhunt.testers.spaces import DECISION_SIZES, boundary_plans
 from tests.helpers import run_tables
 
 RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.json").read_text())
@@ -83,6 +84,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("cem", {"space": "sideways"}, "space: must be one of open, aim, route, mixed, not"),
         ("cem", {"noise_exponent": -1}, "noise_exponent: must be a number from 0 to 4, not -1"),
         ("qd", {"aim": True}, "aim: unknown parameter"),
+        ("qd", {"probes": 1}, "probes: must be true or false, not 1"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
     ],
 )
@@ -184,3 +186,41 @@ def test_cem_with_coloured_noise_searches_and_says_so(tmp_path):
     assert head_on_run(directory, "cem", params, episodes=12)["episodes"] == 12
     settings = json.loads((directory / "tester" / "cem.json").read_text())
     assert (settings["noise_exponent"], settings["space"]) == (2.0, "route")
+
+
+def test_the_boundary_plans_hold_one_decision_at_top_speed():
+    for space, plans in [(space, boundary_plans(space, 15)) for space in DECISION_SIZES]:
+        assert plans.shape == (3 ** (DECISION_SIZES[space] - 1), 15, DECISION_SIZES[space])
+        assert (plans[:, :, 0] == 1.0).all()
+        assert (plans == plans[:, :1, :]).all()  # one decision throughout
+        assert set(np.unique(plans[:, :, 1:])) == {-1.0, 0.0, 1.0}
+    # Among the route's: stand on it at its goal.
+    assert [1.0, 1.0, 0.0] in boundary_plans("route", 1)[:, 0].tolist()
+
+
+@pytest.mark.parametrize(
+    ("tester", "params"),
+    [("cem", {"population": 12}), ("qd", {"batch_size": 4, "emitters": 1})],
+)
+def test_the_boundary_probes_catch_a_robot_that_docks_blind(tester, params, tmp_path):
+    # DockingMode stops for nobody in its last 3 m; a human waiting on its route at the goal,
+    # one of the route space's boundary values, is run into. In the crossing the goal lies
+    # behind a shelf block from where the human starts.
+    def run(probes: bool, name: str) -> dict:
+        config = RunConfig(
+            scenario="crossing",
+            field="none",
+            tester=tester,
+            tester_params={**params, "space": "route", "clear_path": True, "probes": probes},
+            seed=0,
+            episodes=12,
+            controller=PluginSpec(path="hazardhunt.sut.conservative:DockingMode"),
+        )
+        return record_run(config, tmp_path / name)
+
+    probed = run(True, "probed")
+    assert probed["failures"] > 0
+    assert probed["first_failure_episode"] < len(boundary_plans("route", 1))
+    settings = json.loads((tmp_path / "probed" / "tester" / f"{tester}.json").read_text())
+    assert settings["probes"] is True
+    assert run(False, "unprobed")["failures"] == 0

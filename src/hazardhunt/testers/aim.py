@@ -69,12 +69,15 @@ def aim_point(simulation: Simulation, bearing: float, standoff: float) -> NDArra
     )
 
 
-def aimed_action(simulation: Simulation, aim: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
+def aimed_action(
+    simulation: Simulation, aim: NDArray[np.floating[Any]], detour: bool = False
+) -> NDArray[np.float32]:
     """The normalised (speed, turn rate) action that walks the human, over the next decision
-    period, towards the point ``aim`` (speed, bearing, stand-off in [-1, 1]) names."""
+    period, towards the point ``aim`` (speed, bearing, stand-off in [-1, 1]) names (round the
+    obstacles with ``detour``: :func:`walk_towards`)."""
     wanted_speed, bearing, standoff = np.clip(np.asarray(aim, dtype=np.float64), -1.0, 1.0)
     target = aim_point(simulation, math.pi * bearing, 0.5 * (standoff + 1.0) * STANDOFF_MAX)
-    return walk_towards(simulation, target, wanted_speed)
+    return walk_towards(simulation, target, wanted_speed, detour)
 
 
 def route_point(simulation: Simulation, along: float, offset: float) -> NDArray[np.float64]:
@@ -86,26 +89,40 @@ def route_point(simulation: Simulation, along: float, offset: float) -> NDArray[
 
 
 def route_action(
-    simulation: Simulation, decision: NDArray[np.floating[Any]]
+    simulation: Simulation, decision: NDArray[np.floating[Any]], detour: bool = False
 ) -> NDArray[np.float32]:
     """The normalised (speed, turn rate) action that walks the human, over the next decision
     period, towards the point of the robot's route ``decision`` (speed, share of the route,
-    offset beside it in [-1, 1]) names."""
+    offset beside it in [-1, 1]) names (round the obstacles with ``detour``:
+    :func:`walk_towards`)."""
     wanted_speed, along, offset = np.clip(np.asarray(decision, dtype=np.float64), -1.0, 1.0)
     target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
-    return walk_towards(simulation, target, wanted_speed)
+    return walk_towards(simulation, target, wanted_speed, detour)
 
 
 def walk_towards(
-    simulation: Simulation, target: NDArray[np.float64], wanted_speed: float
+    simulation: Simulation,
+    target: NDArray[np.float64],
+    wanted_speed: float,
+    detour: bool = False,
 ) -> NDArray[np.float32]:
     """The normalised action whose arc over the next decision period ends nearest ``target``,
     at the normalised ``wanted_speed`` or slower where that would overshoot; standing, the
-    human turns to face the target."""
+    human turns to face the target.
+
+    With ``detour``, a target behind an obstacle is reached the short way round it: the human
+    heads for the next point of that way (:meth:`~hazardhunt.world.navigation.WalkGrid.waypoint`)
+    and slows down only near the target itself. Without it, the human walks straight at the
+    target and stops where an obstacle is in the way.
+    """
     human = simulation.human_params
     period = simulation.decision_period
     x, y, heading = simulation.human_pose
-    distance = math.hypot(target[0] - x, target[1] - y)
+    if detour:
+        grid = simulation.scenario.floor.walk_grid(human.radius)
+        target, distance = grid.waypoint(np.array([x, y]), target)
+    else:
+        distance = math.hypot(target[0] - x, target[1] - y)
     speed = min(0.5 * (wanted_speed + 1.0) * human.max_speed, distance / period)
     if speed < 1e-6:
         # Standing: face the point, so that the next step towards it starts well.

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES, boundary_plans
 
 MAX_POPULATION = 10_000
 """The largest batch: the weights of its elites are kept in memory from the start."""
@@ -54,8 +54,11 @@ class CrossEntropyTester:
         clear_path: bool = False,
         space: str = "open",
         noise_exponent: float = 0.0,
+        probes: bool = False,
     ) -> None:
-        """Args:
+        """This is long because it checks every parameter, so that an error names the one at fault.
+
+        Args:
         seed: Seeds the sampling.
         population: Episodes per batch.
         elite_fraction: Share of a batch that refits the Gaussian.
@@ -77,6 +80,8 @@ class CrossEntropyTester:
             (iCEM's coloured noise, Pinneri et al. 2020): 0 draws every decision
             independently, larger exponents give smoother sequences (2: a random walk's
             spectrum), in which a human keeps to one plan for longer.
+        probes: Whether each space's first batch starts with the space's boundary values
+            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 9 and 9 episodes).
 
         Raises:
             TesterParameterError: A parameter out of its range.
@@ -100,6 +105,7 @@ class CrossEntropyTester:
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
             "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
+            "probes": (probes, "true or false", isinstance(probes, bool)),
             "noise_exponent": (
                 noise_exponent,
                 "a number from 0 to 4",
@@ -123,6 +129,7 @@ class CrossEntropyTester:
         self.clear_path = clear_path
         self.space = space
         self.noise_exponent = float(noise_exponent)
+        self.probes = probes
         self.restarts = 0
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
@@ -141,6 +148,9 @@ class CrossEntropyTester:
             count = min(self.population, episodes - env.episodes_done)
             noise = coloured_noise(rng, (count, *shape), self.noise_exponent)
             samples = np.clip(search.mean + search.std * noise, -1.0, 1.0)
+            if self.probes and turn <= len(spaces):
+                plans = boundary_plans(space, env.horizon)[:count]
+                samples[: len(plans)] = plans
             results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, space)
             if env.episodes_done >= episodes:
                 break  # the budget is spent: nothing left to refit the Gaussian for
@@ -189,6 +199,7 @@ class CrossEntropyTester:
             "clear_path": self.clear_path,
             "space": self.space,
             "noise_exponent": self.noise_exponent,
+            "probes": self.probes,
             "restarts": self.restarts,
         }
         (directory / "cem.json").write_text(json.dumps(settings, indent=2) + "\n")

@@ -33,7 +33,7 @@ from hazardhunt.testers.base import (
     TesterParameterError,
     check_parameters,
 )
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES, boundary_plans
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
 
@@ -72,8 +72,11 @@ class QualityDiversityTester:
         n_workers: int = 1,
         clear_path: bool = False,
         space: str = "open",
+        probes: bool = False,
     ) -> None:
-        """Args:
+        """This is long because it checks every parameter, so that an error names the one at fault.
+
+        Args:
         seed: Seeds the archive and the emitters.
         measures: The entries that span the archive (of ``bearing``, ``robot_speed``,
             ``emergency_stop``, ``route_share``, ``human_speed``;
@@ -96,6 +99,8 @@ class QualityDiversityTester:
             (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
             or ``mixed``: the emitters take the spaces in turn (the first ``open``, the
             second ``aim``, the third ``route``, ...) and fill one archive.
+        probes: Whether the search starts with its spaces' boundary values, into the archive
+            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 9 and 9 episodes).
 
         Raises:
             TesterParameterError: An unknown measure or algorithm, or a setting out of its
@@ -129,6 +134,7 @@ class QualityDiversityTester:
             ),
             "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
             "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
+            "probes": (probes, "true or false", isinstance(probes, bool)),
         }
         check_parameters(self.name, checks)
         self.seed = seed
@@ -143,6 +149,7 @@ class QualityDiversityTester:
         self.n_workers = n_workers
         self.clear_path = clear_path
         self.space = space
+        self.probes = probes
         self.archive: Any = None
 
     @property
@@ -155,6 +162,8 @@ class QualityDiversityTester:
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         scheduler = self._scheduler(env)
+        if self.probes:
+            self._probe(env, scheduler, episodes)
         while env.episodes_done < episodes:
             solutions = scheduler.ask()
             left = episodes - env.episodes_done
@@ -166,6 +175,23 @@ class QualityDiversityTester:
                 self.archive.add(solutions[: len(results)], objective, measures)
                 break
             scheduler.tell(objective, measures)
+
+    def _probe(self, env: EpisodeRecorder, scheduler: Any, episodes: int) -> None:
+        """Play the boundary values of every space searched into the archive(s)."""
+        for space in SPACES if self.space == "mixed" else (self.space,):
+            plans = boundary_plans(space, env.horizon)[: episodes - env.episodes_done]
+            if len(plans) == 0:
+                return
+            results = env.evaluate_batch(list(plans), self.n_workers, self.clear_path, space)
+            solutions = np.zeros((len(plans), env.horizon, self.decision_size))
+            solutions[:, :, : plans.shape[2]] = plans
+            objective = [result.summary.max_risk for result in results]
+            measures = [measures_of(result.summary, self.measures) for result in results]
+            archives = [scheduler.archive]
+            if scheduler.result_archive is not scheduler.archive:
+                archives.append(scheduler.result_archive)  # CMA-MAE's
+            for archive in archives:
+                archive.add(solutions.reshape(len(plans), -1), objective, measures)
 
     def _play(self, env: EpisodeRecorder, solutions: NDArray[np.float64]) -> list[EpisodeResult]:
         """Play the emitters' solutions, in order, each emitter's batch in its space."""
@@ -299,5 +325,6 @@ class QualityDiversityTester:
             "es": self.es,
             "clear_path": self.clear_path,
             "space": self.space,
+            "probes": self.probes,
         }
         (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")

@@ -12,11 +12,14 @@ search space:
 
 Every space plays the actions it chooses, and the episode records those, so an episode
 replays exactly without knowing its space. ``clear_path`` makes any of them keep the human
-clear of walls and shelves (:func:`~hazardhunt.testers.clear_path.clear_action`).
+clear of walls and shelves (:func:`~hazardhunt.testers.clear_path.clear_action`), and makes
+the closed-loop ones walk round an obstacle between the human and its target
+(:mod:`hazardhunt.world.navigation`) instead of stopping at it.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -28,7 +31,8 @@ from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.aim import aimed_action, route_action
 from hazardhunt.testers.clear_path import clear_action, play_decisions
 
-ToAction = Callable[[Simulation, NDArray[np.floating[Any]]], NDArray[np.float32]]
+ToAction = Callable[[Simulation, NDArray[np.floating[Any]], bool], NDArray[np.float32]]
+"""A closed-loop space's decision -> action, given whether to walk round obstacles."""
 
 CLOSED_LOOP: dict[str, ToAction] = {"aim": aimed_action, "route": route_action}
 """The spaces whose decisions are turned into actions while they are played."""
@@ -41,6 +45,20 @@ SPACES = tuple(DECISION_SIZES)
 
 SPACE_CHOICES = (*SPACES, "mixed")
 """The values of a searcher's ``space``: one search space, or all of them in turn."""
+
+
+def boundary_plans(space: str, horizon: int) -> NDArray[np.float64]:
+    """A space's boundary values as whole episodes (boundary-value analysis): the human keeps
+    one decision throughout, at its top speed, with every other number of the decision at -1,
+    0 or 1; shape (plans, ``horizon``, numbers per decision).
+
+    In the closed-loop spaces these are the plain attacks a tester tries first: walk into the
+    robot from ahead, beside or behind it, or wait on its route (or beside it) at the start,
+    the middle or the goal of its mission, where a controller switches modes.
+    """
+    others = itertools.product((-1.0, 0.0, 1.0), repeat=DECISION_SIZES[space] - 1)
+    plans = np.array([(1.0, *values) for values in others])
+    return np.repeat(plans[:, None, :], horizon, axis=1)
 
 
 def play_in_space(
@@ -62,7 +80,7 @@ def play_in_space(
     steer = CLOSED_LOOP.get(space)
 
     def to_action(simulation: Simulation, decision: NDArray[np.floating[Any]]) -> NDArray[Any]:
-        action = decision if steer is None else steer(simulation, decision)
+        action = decision if steer is None else steer(simulation, decision, clear_path)
         return clear_action(simulation, action) if clear_path else np.asarray(action, np.float32)
 
     return play_decisions(simulation, decisions, to_action, keep_trajectory)

@@ -15,6 +15,7 @@ from hazardhunt.world.geometry import (
     point_in_polygon,
     polygon_edges,
 )
+from hazardhunt.world.navigation import WalkGrid
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,8 @@ class FloorMap:
     _cells_by_radius: dict[float, _ObstacleCells] = field(init=False, repr=False, compare=False)
     """Per disc radius: which obstacles a disc centred in each cell of a grid over the floor
     may touch (:meth:`_cells`)."""
+    _walk_grids: dict[float, WalkGrid] = field(init=False, repr=False, compare=False)
+    """Per disc radius: the ways round the obstacles (:meth:`walk_grid`)."""
 
     def __post_init__(self) -> None:
         polygons = [o.polygon for o in self.obstacles]
@@ -86,6 +89,7 @@ class FloorMap:
         )
         object.__setattr__(self, "_segments", segments)
         object.__setattr__(self, "_cells_by_radius", {})
+        object.__setattr__(self, "_walk_grids", {})
 
     def inside_obstacle(self, point: FloatArray) -> bool:
         """Whether a point lies strictly inside any obstacle (even-odd rule, all at once)."""
@@ -223,6 +227,14 @@ class FloorMap:
         cells = _ObstacleCells(self.width, self.height, radius, self.bounding_boxes, self._segments)
         self._cells_by_radius[radius] = cells
         return cells
+
+    def walk_grid(self, radius: float) -> WalkGrid:
+        """The ways round the obstacles for a disc of ``radius`` (built at the first call for
+        the radius, then kept)."""
+        grid = self._walk_grids.get(radius)
+        if grid is None:
+            grid = self._walk_grids[radius] = WalkGrid(self, radius)
+        return grid
 
     def on_floor(self, point: FloatArray, margin: float = 0.0) -> bool:
         """Whether a point lies on the floor at least ``margin`` from its outer edge."""
