@@ -189,12 +189,20 @@ def test_cem_with_coloured_noise_searches_and_says_so(tmp_path):
 
 
 def test_the_boundary_plans_hold_one_decision_at_top_speed():
-    for space, plans in [(space, boundary_plans(space, 15)) for space in DECISION_SIZES]:
-        assert plans.shape == (3 ** (DECISION_SIZES[space] - 1), 15, DECISION_SIZES[space])
+    counts = {}
+    for space in DECISION_SIZES:
+        plans = boundary_plans(space, 15)
+        counts[space] = len(plans)
+        assert plans.shape[1:] == (15, DECISION_SIZES[space])
         assert (plans[:, :, 0] == 1.0).all()
         assert (plans == plans[:, :1, :]).all()  # one decision throughout
-        assert set(np.unique(plans[:, :, 1:])) == {-1.0, 0.0, 1.0}
-    # Among the route's: stand on it at its goal.
+        assert len(np.unique(plans[:, 0], axis=0)) == len(plans)  # no two alike
+    assert counts == {"open": 3, "aim": 12, "route": 9}
+    # Among the aimed ones: walk into the robot's left and right sides; among the route's: stand
+    # on it at its goal.
+    aimed = boundary_plans("aim", 1)[:, 0].tolist()
+    assert [1.0, 0.5, -1.0] in aimed
+    assert [1.0, -0.5, -1.0] in aimed
     assert [1.0, 1.0, 0.0] in boundary_plans("route", 1)[:, 0].tolist()
 
 

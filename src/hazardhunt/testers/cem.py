@@ -81,7 +81,7 @@ class CrossEntropyTester:
             independently, larger exponents give smoother sequences (2: a random walk's
             spectrum), in which a human keeps to one plan for longer.
         probes: Whether each space's first batch starts with the space's boundary values
-            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 9 and 9 episodes).
+            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 12 and 9 episodes).
 
         Raises:
             TesterParameterError: A parameter out of its range.

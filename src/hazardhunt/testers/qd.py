@@ -100,7 +100,7 @@ class QualityDiversityTester:
             or ``mixed``: the emitters take the spaces in turn (the first ``open``, the
             second ``aim``, the third ``route``, ...) and fill one archive.
         probes: Whether the search starts with its spaces' boundary values, into the archive
-            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 9 and 9 episodes).
+            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 12 and 9 episodes).
 
         Raises:
             TesterParameterError: An unknown measure or algorithm, or a setting out of its

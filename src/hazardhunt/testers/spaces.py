@@ -47,17 +47,27 @@ SPACE_CHOICES = (*SPACES, "mixed")
 """The values of a searcher's ``space``: one search space, or all of them in turn."""
 
 
+BOUNDARY_VALUES: dict[str, tuple[tuple[float, ...], ...]] = {
+    "open": ((-1.0, 0.0, 1.0),),
+    # The bearing wraps round (-1 and 1 are both behind the robot): its quarter turns instead.
+    "aim": ((-0.5, 0.0, 0.5, 1.0), (-1.0, 0.0, 1.0)),
+    "route": ((-1.0, 0.0, 1.0), (-1.0, 0.0, 1.0)),
+}
+"""Per space, the boundary values of each number of a decision after the speed."""
+
+
 def boundary_plans(space: str, horizon: int) -> NDArray[np.float64]:
     """A space's boundary values as whole episodes (boundary-value analysis): the human keeps
-    one decision throughout, at its top speed, with every other number of the decision at -1,
-    0 or 1; shape (plans, ``horizon``, numbers per decision).
+    one decision throughout, at its top speed, with every other number of the decision at one
+    of its :data:`BOUNDARY_VALUES` (-1, 0 or 1; a bearing at its quarter turns); shape (plans,
+    ``horizon``, numbers per decision).
 
     In the closed-loop spaces these are the plain attacks a tester tries first: walk into the
-    robot from ahead, beside or behind it, or wait on its route (or beside it) at the start,
-    the middle or the goal of its mission, where a controller switches modes.
+    robot from ahead, behind or either side, or keep 1.5 or 3 m from it there; wait on its
+    route, or 3 m to either side of it, at the start, the middle or the goal of its mission,
+    where a controller switches modes.
     """
-    others = itertools.product((-1.0, 0.0, 1.0), repeat=DECISION_SIZES[space] - 1)
-    plans = np.array([(1.0, *values) for values in others])
+    plans = np.array([(1.0, *values) for values in itertools.product(*BOUNDARY_VALUES[space])])
     return np.repeat(plans[:, None, :], horizon, axis=1)
 
 
