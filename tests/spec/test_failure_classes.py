@@ -121,6 +121,14 @@ def test_the_last_entry_into_the_field_decides_edge_entry():
     assert classify(rows, "left") == "edge-entry/moving"
 
 
+def test_a_graze_of_the_field_between_two_samples_is_read_where_the_stop_began():
+    # The human walks into the robot's right side; between the last two samples its disc grazes
+    # the field beside the front corner, which stops the robot, and at the contact it is out of
+    # the field again. No sample shows it in the field: where the stop began decides.
+    rows = [*far_away(), sample(9.8, (0.1, -0.75)), sample(10.0, (0.09, -0.46), stop=True)]
+    assert classify(rows, "right") == "edge-entry/moving"
+
+
 @pytest.mark.parametrize(
     ("rows", "face"),
     [

@@ -152,10 +152,15 @@ class MechanismClassifier:
         return OTHER
 
     def _entered_over_edge(self, trajectory: Sequence[TrajectorySample]) -> bool:
-        """Whether the human's last entry into the field came from beside the robot."""
+        """Whether the human's last entry into the field came from beside the robot.
+
+        A human who grazes the field between two samples and is out of it again at the next
+        one (beside the robot, at the contact) shows in no sample: then the first sample of
+        the stop that holds at the contact stands for the entry.
+        """
         entry = last_field_entry(trajectory)
         if entry is None:
-            return False
+            entry = final_stop_onset(trajectory)
         row = trajectory[entry]
         forward, _ = to_body_frame(
             np.array([row.human_x, row.human_y]), row.robot_x, row.robot_y, row.robot_heading
@@ -189,6 +194,14 @@ def last_field_entry(trajectory: Sequence[TrajectorySample]) -> int | None:
             entry = index
         was_in_field = in_field
     return entry
+
+
+def final_stop_onset(trajectory: Sequence[TrajectorySample]) -> int:
+    """Index of the first sample of the emergency stop that holds at the last sample."""
+    onset = len(trajectory) - 1
+    while onset > 0 and trajectory[onset - 1].emergency_stop:
+        onset -= 1
+    return onset
 
 
 def classify_failures(
