@@ -16,11 +16,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import distance_transform_edt
-from scipy.sparse import coo_matrix, csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
+
     from hazardhunt.world.floor import FloorMap
 
 CELL = 0.25
@@ -40,6 +39,10 @@ class WalkGrid:
     """The cells of a floor where a disc of ``radius`` fits, and the shortest ways between them."""
 
     def __init__(self, floor: FloorMap, radius: float) -> None:
+        # SciPy loads here, at the first walk round an obstacle, not with every import of the
+        # floor.
+        from scipy.ndimage import distance_transform_edt
+
         self.floor = floor
         self.radius = radius
         self.columns = max(int(floor.width / CELL), 1)
@@ -103,6 +106,8 @@ class WalkGrid:
 
     def _tree(self, target: int) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
         """The shortest ways from every cell to ``target``: predecessors and lengths."""
+        from scipy.sparse.csgraph import dijkstra
+
         if target in self._trees:
             self._trees.move_to_end(target)
             return self._trees[target]
@@ -119,6 +124,8 @@ class WalkGrid:
 def _grid_graph(free: NDArray[np.bool_]) -> csr_matrix:
     """The edges between neighbouring free cells (diagonals only where both cells beside them
     are free, so that a way never cuts an obstacle's corner), weighted by length."""
+    from scipy.sparse import coo_matrix
+
     rows, columns = free.shape
     index = np.arange(rows * columns).reshape(rows, columns)
     starts: list[NDArray[np.intp]] = []
