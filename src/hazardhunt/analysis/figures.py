@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,7 @@ from matplotlib.patches import Rectangle
 from matplotlib.ticker import MaxNLocator
 
 from hazardhunt.env.rendering import draw_floor
+from hazardhunt.spec.descriptors import MEASURE_RANGES
 from hazardhunt.testers.registry import colour_of, sort_testers
 from hazardhunt.world.scenario import load_scenario
 
@@ -255,24 +257,27 @@ def _count(number: int, one: str, many: str = "") -> str:
     return f"{number} {one if number == 1 else many or one + 's'}"
 
 
-ARCHIVE_AXES: dict[str, tuple[str, float, float, int]] = {
-    "bearing": ("bearing around the robot (deg; 0 ahead, 90 left)", -180.0, 180.0, 12),
-    "robot_speed": ("robot speed (m/s)", 0.0, 1.2, 6),
-    "emergency_stop": ("safety layer (0 never stopped, 1 holding, 2 released)", -0.5, 2.5, 3),
-    "route_share": ("robot's share of its route (0 start, 1 goal)", 0.0, 1.0, 5),
-    "human_speed": ("human speed (m/s)", 0.0, 1.5, 6),
+ARCHIVE_AXES: dict[str, tuple[str, int]] = {
+    "bearing": ("bearing around the robot (deg; 0 ahead, 90 left)", 12),
+    "robot_speed": ("robot speed (m/s)", 6),
+    "emergency_stop": ("safety layer (0 never stopped, 1 holding, 2 released)", 3),
+    "route_share": ("robot's share of its route (0 start, 1 goal)", 5),
+    "human_speed": ("human speed (m/s)", 6),
 }
-"""Per archive measure: its axis label, the range drawn (widened to the values) and its cells."""
+"""Per archive measure: its axis label and its cells; the range drawn is the measure's
+:data:`~hazardhunt.spec.descriptors.MEASURE_RANGES` (bearings in degrees), widened to the
+values."""
 
 
 def _archive_axis(archive: pd.DataFrame, name: str | None) -> tuple[str, Any, Any]:
     """An axis of the heat map: its label, its cell edges and each cell's values on it."""
     if name is None:
         return "", np.array([0.0, 1.0]), np.zeros(len(archive))
-    label, low, high, cells = ARCHIVE_AXES.get(name, (name, 0.0, 1.0, 6))
+    label, cells = ARCHIVE_AXES.get(name, (name, 6))
+    low, high = MEASURE_RANGES.get(name, (0.0, 1.0))
     values = archive[name].to_numpy(dtype=float)
     if name == "bearing":
-        values = np.degrees(values)
+        values, low, high = np.degrees(values), math.degrees(low), math.degrees(high)
     if len(values):
         low, high = min(low, float(values.min())), max(high, float(values.max()))
     return label, np.linspace(low, high, cells + 1), values

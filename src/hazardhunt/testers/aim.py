@@ -36,9 +36,6 @@ from numpy.typing import NDArray
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.testers.clear_path import human_path
 
-AIM_SIZE = 3
-"""Numbers per aimed decision: speed, bearing, stand-off."""
-
 STANDOFF_MAX = 3.0
 """The farthest a decision aims from the robot's outline, in m."""
 

@@ -26,7 +26,12 @@ from numpy.typing import NDArray
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
 from hazardhunt.testers.novelty import FailureArchive
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES, boundary_plans
+from hazardhunt.testers.spaces import (
+    DECISION_SIZES,
+    SPACE_CHOICES,
+    boundary_plans,
+    searched_spaces,
+)
 
 MAX_POPULATION = 10_000
 """The largest batch: the weights of its elites are kept in memory from the start."""
@@ -134,7 +139,7 @@ class CrossEntropyTester:
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         rng = np.random.default_rng(self.seed)
-        spaces = SPACES if self.space == "mixed" else (self.space,)
+        spaces = searched_spaces(self.space)
         shapes = {space: (env.horizon, DECISION_SIZES[space]) for space in spaces}
         searches = {
             space: _Search(np.zeros(shape), np.full(shape, self.initial_std))

@@ -26,14 +26,19 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import EpisodeResult
-from hazardhunt.spec.descriptors import MEASURE_NAMES, measures_of
+from hazardhunt.spec.descriptors import MEASURE_NAMES, MEASURE_RANGES, measures_of
 from hazardhunt.testers.base import (
     MAX_WORKER_PROCESSES,
     EpisodeRecorder,
     TesterParameterError,
     check_parameters,
 )
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACE_CHOICES, SPACES, boundary_plans
+from hazardhunt.testers.spaces import (
+    DECISION_SIZES,
+    SPACE_CHOICES,
+    boundary_plans,
+    searched_spaces,
+)
 
 ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
 
@@ -178,7 +183,7 @@ class QualityDiversityTester:
 
     def _probe(self, env: EpisodeRecorder, scheduler: Any, episodes: int) -> None:
         """Play the boundary values of every space searched into the archive(s)."""
-        for space in SPACES if self.space == "mixed" else (self.space,):
+        for space in searched_spaces(self.space):
             plans = boundary_plans(space, env.horizon)[: episodes - env.episodes_done]
             if len(plans) == 0:
                 return
@@ -199,9 +204,10 @@ class QualityDiversityTester:
             decisions = solutions.reshape(len(solutions), env.horizon, self.decision_size)
             return env.evaluate_batch(list(decisions), self.n_workers, self.clear_path, self.space)
         results: list[EpisodeResult] = []
+        spaces = searched_spaces(self.space)
         for start in range(0, len(solutions), self.batch_size):
             emitter = start // self.batch_size
-            space = SPACES[emitter % len(SPACES)] if self.space == "mixed" else self.space
+            space = spaces[emitter % len(spaces)]
             batch = solutions[start : start + self.batch_size]
             decisions = batch.reshape(len(batch), env.horizon, self.decision_size)
             decisions = decisions[:, :, : DECISION_SIZES[space]]
@@ -214,10 +220,8 @@ class QualityDiversityTester:
         from ribs.schedulers import Scheduler
 
         ranges = {
-            "bearing": (-np.pi, np.pi),
+            **MEASURE_RANGES,
             "robot_speed": (0.0, env.simulation.robot_params.max_speed),
-            "emergency_stop": (-0.5, 2.5),
-            "route_share": (0.0, 1.0),
             "human_speed": (0.0, env.simulation.human_params.max_speed),
         }
         dimension = env.horizon * self.decision_size

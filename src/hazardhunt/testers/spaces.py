@@ -47,6 +47,11 @@ SPACE_CHOICES = (*SPACES, "mixed")
 """The values of a searcher's ``space``: one search space, or all of them in turn."""
 
 
+def searched_spaces(space: str) -> tuple[str, ...]:
+    """The search spaces a searcher's ``space`` (of :data:`SPACE_CHOICES`) takes in turn."""
+    return SPACES if space == "mixed" else (space,)
+
+
 BOUNDARY_VALUES: dict[str, tuple[tuple[float, ...], ...]] = {
     "open": ((-1.0, 0.0, 1.0),),
     # The bearing wraps round (-1 and 1 are both behind the robot): its quarter turns instead.
