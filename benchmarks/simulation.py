@@ -9,6 +9,12 @@ by running this script alternately from each (``PYTHONPATH``) and taking medians
 
     python benchmarks/simulation.py --controller pursuit --episodes 100
     python benchmarks/simulation.py --controller nmpc --episodes 15
+
+``--space`` plays uniformly random decisions in a search space instead, the way ``cem`` and
+``qd`` play theirs (with ``--clear-path``, off the walls and, in the closed-loop spaces, round
+the obstacles):
+
+    python benchmarks/simulation.py --controller conservative --space route --clear-path
 """
 
 from __future__ import annotations
@@ -19,11 +25,14 @@ import pstats
 import time
 from typing import Any
 
+import numpy as np
+
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.protocols import Controller
 from hazardhunt.testers.base import EpisodeRecorder, is_failure
 from hazardhunt.testers.random_sampling import RandomTester
+from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
 
 
 def controller_named(name: str) -> Controller | None:
@@ -49,6 +58,13 @@ def main() -> None:
     parser.add_argument("--field", default="1.25m")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--profile", action="store_true", help="print cProfile's top functions")
+    parser.add_argument(
+        "--space",
+        choices=["random", *SPACES],
+        default="random",
+        help="'random': the random tester's episodes; a search space: uniform decisions in it",
+    )
+    parser.add_argument("--clear-path", action="store_true", help="with --space: clear_path")
     args = parser.parse_args()
 
     simulation = Simulation.build(
@@ -67,20 +83,31 @@ def main() -> None:
     simulation.controller.control = timed_control  # type: ignore[method-assign]
     recorder = EpisodeRecorder(AGVEnv.wrapping(simulation), lambda record: None, is_failure)
     tester = RandomTester(args.seed)
-    tester.explore(recorder, 1)  # warm-up: caches, lazy imports
+    rng = np.random.default_rng(args.seed)
+
+    def play(episodes: int) -> None:
+        if args.space == "random":
+            tester.explore(recorder, recorder.episodes_done + episodes)
+            return
+        shape = (episodes, recorder.horizon, DECISION_SIZES[args.space])
+        decisions = list(rng.uniform(-1.0, 1.0, shape))
+        recorder.evaluate_batch(decisions, 1, args.clear_path, args.space)
+
+    play(1)  # warm-up: caches, lazy imports
     recorder.episodes_done, inside_s[0] = 0, 0.0
     profile = cProfile.Profile() if args.profile else None
     wall, cpu = time.perf_counter(), time.process_time()
     if profile is not None:
         profile.enable()
-    tester.explore(recorder, args.episodes)
+    play(args.episodes)
     if profile is not None:
         profile.disable()
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     if profile is not None:
         pstats.Stats(profile).sort_stats("tottime").print_stats(30)
     print(
-        f"{args.controller} {args.scenario} {args.field}: {args.episodes / cpu:.2f} episodes per "
+        f"{args.controller} {args.scenario} {args.field} {args.space}"
+        f"{' clear_path' if args.clear_path else ''}: {args.episodes / cpu:.2f} episodes per "
         f"CPU s, {args.episodes / wall:.2f} per wall s, "
         f"{1000 * (cpu - inside_s[0]) / args.episodes:.2f} CPU ms per episode outside the "
         "controller"
