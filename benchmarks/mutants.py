@@ -234,7 +234,15 @@ def main() -> None:
     started = time.perf_counter()
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=context) as pool:
-        runs = list(pool.map(one_run, grid))
+        runs = []
+        for run in pool.map(one_run, grid):
+            runs.append(run)
+            print(
+                f"[{len(runs)}/{len(grid)}] {run['tester']} {run['scenario']} {run['field']} "
+                f"seed {run['seed']} {run['sut']}: {run['failures']} failures "
+                f"({run['wall_time_s']:.0f} s)",
+                flush=True,
+            )
     wall = time.perf_counter() - started
     rows = score(runs, args)
     print_tables(runs, rows, args)
