@@ -228,14 +228,24 @@ def test_ctrl_c_says_the_run_was_interrupted_and_how_to_resume(tmp_path):
         *map(str, run_args(out, episodes=10_000)),
     ]
     environment = os.environ | {"COLUMNS": "1000"}
-    with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=environment) as process:
-        started = tmp_path / ".run.partial" / "config.json"
-        deadline = time.monotonic() + 120
-        while not started.exists() and process.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert started.exists(), "the run did not start"
-        process.send_signal(signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
+    with subprocess.Popen(
+        command,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=environment,
+        # As in a terminal, whatever started the tests (a shell's background job ignores it).
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    ) as process:
+        try:
+            started = tmp_path / ".run.partial" / "config.json"
+            deadline = time.monotonic() + 120
+            while not started.exists() and process.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.1)
+            assert started.exists(), "the run did not start"
+            process.send_signal(signal.SIGINT)
+            _, stderr = process.communicate(timeout=60)
+        finally:
+            process.kill()  # a run that ignored Ctrl-C must not hold the test for its whole length
     assert process.returncode == 130
     assert "Traceback" not in stderr
     assert "interrupted: run the same command again to resume" in stderr.strip().splitlines()[-1]
