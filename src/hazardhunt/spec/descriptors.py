@@ -42,14 +42,12 @@ MEASURE_NAMES = (*DESCRIPTOR_NAMES, "route_share")
 """Everything :func:`measures_of` reads: the descriptor and one more entry."""
 
 MEASURE_RANGES = {
-    "bearing": (-math.pi, math.pi),
-    "robot_speed": (0.0, 1.2),
+    **dict(zip(DESCRIPTOR_NAMES, DESCRIPTOR_BOUNDS, strict=True)),
     "emergency_stop": (-0.5, 2.5),
     "route_share": (0.0, 1.0),
-    "human_speed": (0.0, 1.5),
 }
-"""Each measure's range when it spans an archive's axis (the speeds up to the built-in robot's
-and human's top speeds; the safety layer's three codes each in the middle of a cell)."""
+"""Each measure's range when it spans an archive's axis: the descriptor's bounds, but with the
+safety layer's three codes each in the middle of a cell."""
 
 EMERGENCY_STOP_CODES = {"never": 0.0, "holding": 1.0, "released": 2.0}
 """The safety layer's history as a number."""

@@ -106,11 +106,11 @@ class WalkGrid:
 
     def _tree(self, target: int) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
         """The shortest ways from every cell to ``target``: predecessors and lengths."""
-        from scipy.sparse.csgraph import dijkstra
-
         if target in self._trees:
             self._trees.move_to_end(target)
             return self._trees[target]
+        from scipy.sparse.csgraph import dijkstra
+
         lengths, predecessors = dijkstra(
             self._graph, directed=False, indices=target, return_predecessors=True
         )
