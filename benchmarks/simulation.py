@@ -31,8 +31,9 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.protocols import Controller
 from hazardhunt.testers.base import EpisodeRecorder, is_failure
+from hazardhunt.testers.evaluator import EpisodeEvaluator, Plan
 from hazardhunt.testers.random_sampling import RandomTester
-from hazardhunt.testers.spaces import DECISION_SIZES, SPACES
+from hazardhunt.testers.spaces import DECISION_KINDS, DecisionSpace
 
 
 def controller_named(name: str) -> Controller | None:
@@ -60,11 +61,11 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="print cProfile's top functions")
     parser.add_argument(
         "--space",
-        choices=["random", *SPACES],
+        choices=["random", *DECISION_KINDS],
         default="random",
-        help="'random': the random tester's episodes; a search space: uniform decisions in it",
+        help="'random': the random tester's episodes; a decision space: uniform decisions in it",
     )
-    parser.add_argument("--clear-path", action="store_true", help="with --space: clear_path")
+    parser.add_argument("--detour", "--clear-path", action="store_true", help="with --space")
     args = parser.parse_args()
 
     simulation = Simulation.build(
@@ -84,14 +85,15 @@ def main() -> None:
     recorder = EpisodeRecorder(AGVEnv.wrapping(simulation), lambda record: None, is_failure)
     tester = RandomTester(args.seed)
     rng = np.random.default_rng(args.seed)
+    evaluator = EpisodeEvaluator(recorder)
 
     def play(episodes: int) -> None:
         if args.space == "random":
             tester.explore(recorder, recorder.episodes_done + episodes)
             return
-        shape = (episodes, recorder.horizon, DECISION_SIZES[args.space])
-        decisions = list(rng.uniform(-1.0, 1.0, shape))
-        recorder.evaluate_batch(decisions, 1, args.clear_path, args.space)
+        space = DecisionSpace(args.space, args.detour)
+        decisions = rng.uniform(-1.0, 1.0, (episodes, recorder.horizon, space.size))
+        evaluator.evaluate([Plan(space, sequence) for sequence in decisions])
 
     play(1)  # warm-up: caches, lazy imports
     recorder.episodes_done, inside_s[0] = 0, 0.0
@@ -107,7 +109,7 @@ def main() -> None:
         pstats.Stats(profile).sort_stats("tottime").print_stats(30)
     print(
         f"{args.controller} {args.scenario} {args.field} {args.space}"
-        f"{' clear_path' if args.clear_path else ''}: {args.episodes / cpu:.2f} episodes per "
+        f"{' detour' if args.detour else ''}: {args.episodes / cpu:.2f} episodes per "
         f"CPU s, {args.episodes / wall:.2f} per wall s, "
         f"{1000 * (cpu - inside_s[0]) / args.episodes:.2f} CPU ms per episode outside the "
         "controller"

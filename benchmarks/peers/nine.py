@@ -54,6 +54,11 @@ def main() -> None:
     parser.add_argument("files", nargs="+", type=Path)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--new", nargs="+", default=["cem", "qd"], help="the new testers")
+    parser.add_argument(
+        "--default",
+        help="a method to hold against every other one: in how many cases it finds at least "
+        "as many classes as each, and all of them together",
+    )
     args = parser.parse_args()
 
     rows = rows_of(args.files, args.seed)
@@ -86,6 +91,39 @@ def main() -> None:
     print(f"- at least as many classes as {' and '.join(BASELINES)}: {at_least} of {complete}")
     print(f"- strictly more: {strictly_more} of {complete}")
     print(f"- the union of all methods' classes: {union_reached} of {complete}")
+    if args.default:
+        print_default(rows, cases, args.default)
+
+
+def print_default(rows: dict[tuple[str, str], dict[str, Any]], cases: list[str], name: str) -> None:
+    """Per case, whether ``name`` found at least as many classes as every other method, and
+    every method's classes together; then the counts."""
+    as_many, union_reached, complete = 0, 0, 0
+    print()
+    print(f"`{name}` against every other method:")
+    print()
+    print("| case | classes | best other (method) | all methods | >= every method | union |")
+    print("|---|---|---|---|---|---|")
+    for case in cases:
+        if (case, name) not in rows:
+            continue
+        complete += 1
+        own = classes(rows[(case, name)])
+        others = {m: classes(r) for (c, m), r in rows.items() if c == case and m != name}
+        union = set(own).union(*others.values())
+        best = max(others, key=lambda m: len(others[m]), default=None)
+        best_count = len(others[best]) if best else 0
+        enough = len(own) >= best_count
+        complete_union = own == union
+        as_many += enough
+        union_reached += complete_union
+        print(
+            f"| {case} | {len(own)} | {best_count} (`{best}`) | {len(union)} | "
+            f"{'yes' if enough else 'no'} | {'yes' if complete_union else 'no'} |"
+        )
+    print()
+    print(f"- at least as many classes as every other method: {as_many} of {complete}")
+    print(f"- every method's classes together: {union_reached} of {complete}")
 
 
 if __name__ == "__main__":

@@ -189,11 +189,10 @@ RegressClassifierOption = Annotated[
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
-    tester: Annotated[
-        str,
-        typer.Option(help=f"{', '.join(TESTERS)}, or your own tester as package.module:Class."),
-    ],
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
+    tester: Annotated[
+        str, typer.Option(help=f"{', '.join(TESTERS)}, or yours as package.module:Class.")
+    ] = "portfolio",
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,

@@ -445,7 +445,7 @@ def test_a_campaign_runs_a_tester_plug_in_beside_a_built_in_one(tmp_path):
          "tester.random: 'random' is a built-in tester"),
         ('[tester.charge]\npath = "campaign_testers:Sleepy"\n',
          "tester.charge: 'campaign_testers:Sleepy' does not satisfy the Tester protocol"),
-        ("", "testers: unknown tester 'charge'"),
+        ("", "testers.1: unknown tester 'charge'"),
     ],
 )  # fmt: skip
 def test_a_campaign_file_with_a_bad_tester_plug_in_names_the_file_and_key(tmp_path, table, message):

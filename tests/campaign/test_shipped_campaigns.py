@@ -12,7 +12,7 @@ CAMPAIGNS = Path(__file__).parents[2] / "campaigns"
 @pytest.mark.parametrize(
     ("name", "runs", "episodes", "testers"),
     [
-        ("quick.toml", 4, 450, {"cem", "qd", "random", "ppo-max"}),
+        ("quick.toml", 3, 450, {"portfolio", "random", "ppo-max"}),
         ("reduced.toml", 81, 300, {"random", "ppo-acc", "ppo-max"}),
         ("study.toml", 81, 20_000, {"random", "ppo-acc", "ppo-max"}),
         ("study-search.toml", 81, 20_000, {"cem", "qd", "ppo-novelty"}),

@@ -39,6 +39,22 @@ CASES = {
         "tester": "ppo-novelty",
         "tester_params": SMALL_PPO,
     },
+    # Two small arms, so that 24 episodes are several batches of each.
+    "portfolio": {
+        "scenario": "head-on",
+        "field": "none",
+        "tester": "portfolio",
+        "tester_params": {
+            "arms": [
+                {"name": "uniform", "method": "uniform", "params": {"batch_size": 4}},
+                {
+                    "name": "aimed",
+                    "method": "cem",
+                    "params": {"batch_size": 4, "space": {"kind": "aim", "detour": True}},
+                },
+            ]
+        },
+    },
     # Two copies of the env in worker processes, their episodes recorded as they end.
     "ppo-max-2-envs": {
         "scenario": "head-on",

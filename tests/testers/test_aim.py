@@ -16,7 +16,7 @@ from hazardhunt.testers.aim import (
     aimed_action,
     route_point,
 )
-from hazardhunt.testers.spaces import play_in_space
+from hazardhunt.testers.spaces import DecisionSpace
 from hazardhunt.world.geometry import point_in_body_frame, point_rectangle_clearance
 
 
@@ -37,7 +37,8 @@ def outline_clearance(sim, point):
 def test_a_human_aimed_at_the_robot_walks_into_it_where_it_aims(sim):
     faces = {}
     for bearing in (0.0, -0.5, 1.0):
-        result = play_in_space(sim, np.tile([1.0, bearing, -1.0], (sim.horizon, 1)), "aim", False)
+        aims = np.tile([1.0, bearing, -1.0], (sim.horizon, 1))
+        result = DecisionSpace("aim").play(sim, aims, False)
         assert result.summary.outcome == "failure"
         faces[bearing] = result.summary.contact_face
     # Ahead and from behind it meets the robot coming at it; aimed at its right, its right.
@@ -55,7 +56,7 @@ def test_the_aim_point_lies_the_stand_off_away_from_the_outline(sim):
 
 def test_a_human_aimed_at_a_distance_keeps_it(sim):
     # Aimed 3 m to the robot's right, the human comes up and walks beside it to the goal.
-    result = play_in_space(sim, np.tile([1.0, -0.5, 1.0], (sim.horizon, 1)), "aim", True)
+    result = DecisionSpace("aim").play(sim, np.tile([1.0, -0.5, 1.0], (sim.horizon, 1)))
     assert result.summary.outcome == "goal"
     assert result.trajectory is not None
     assert min(s.clearance for s in result.trajectory if s.time >= 2.0) > 2.0
@@ -82,7 +83,7 @@ def test_an_aimed_episode_replays_from_the_actions_it_records():
     sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
     aims = np.random.default_rng(0).uniform(-1.0, 1.0, (sim.horizon, 3))
     for space, clear_path in [("aim", False), ("aim", True), ("route", False), ("route", True)]:
-        result = play_in_space(sim, aims, space, False, clear_path)
+        result = DecisionSpace(space, clear_path).play(sim, aims, False)
         replayed = sim.simulate(result.actions, keep_trajectory=False)
         assert replayed.summary == result.summary
         np.testing.assert_array_equal(replayed.actions, result.actions)
@@ -101,7 +102,7 @@ def test_a_route_point_lies_beside_the_route_at_its_share(sim):
 def test_a_human_sent_onto_the_route_waits_there_and_the_robot_runs_into_it(sim):
     # Three quarters along the route, on its centre line: the route follower, which ignores
     # the human, hits it standing, late in its mission.
-    result = play_in_space(sim, np.tile([1.0, 0.5, 0.0], (sim.horizon, 1)), "route", True)
+    result = DecisionSpace("route").play(sim, np.tile([1.0, 0.5, 0.0], (sim.horizon, 1)))
     summary = result.summary
     assert summary.outcome == "failure"
     assert summary.contact_face == "front"
@@ -129,7 +130,7 @@ def test_with_clear_path_a_human_walks_round_a_shelf_to_its_route_point():
     # which ignores it, arrives.
     sim = Simulation.build("crossing", "none", controller=PursuitController())
     goal = np.tile([1.0, 1.0, 0.0], (sim.horizon, 1))
-    walked = play_in_space(sim, goal, "route", True, clear_path=True)
+    walked = DecisionSpace("route", detour=True).play(sim, goal)
     assert walked.trajectory is not None
     arrived = [s for s in walked.trajectory if math.hypot(s.human_x - 18.0, s.human_y - 10.0) < 0.1]
     assert arrived, "the human never reached the goal"

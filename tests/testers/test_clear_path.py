@@ -9,7 +9,7 @@ import pytest
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.pursuit import PursuitController
 from hazardhunt.testers.clear_path import clear_action, human_path
-from hazardhunt.testers.spaces import play_in_space
+from hazardhunt.testers.spaces import DecisionSpace
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +66,7 @@ def test_a_sequence_never_pushes_the_human_against_a_wall_and_replays_from_its_a
         # Nothing blocked the human: it is where its arc ends (up to the physics' integration).
         np.testing.assert_allclose(sim.human_position, expected_end, atol=1e-3)
 
-    result = play_in_space(sim, sequence, "open", keep_trajectory=False, clear_path=True)
+    result = DecisionSpace("open", detour=True).play(sim, sequence, keep_trajectory=False)
     replayed = sim.simulate(result.actions, keep_trajectory=False)
     assert replayed.summary == result.summary
     np.testing.assert_array_equal(replayed.actions, result.actions)

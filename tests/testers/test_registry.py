@@ -11,7 +11,15 @@ from hazardhunt.testers.registry import colour_of, sort_testers
 
 
 def test_the_built_in_testers_are_registered_with_their_reward_and_colour():
-    assert list(TESTERS) == ["random", "ppo-acc", "ppo-max", "cem", "qd", "ppo-novelty"]
+    assert list(TESTERS) == [
+        "random",
+        "ppo-acc",
+        "ppo-max",
+        "cem",
+        "qd",
+        "ppo-novelty",
+        "portfolio",
+    ]
     assert {name: entry.reward for name, entry in TESTERS.items()} == {
         "random": "max",
         "ppo-acc": "acc",
@@ -19,6 +27,7 @@ def test_the_built_in_testers_are_registered_with_their_reward_and_colour():
         "cem": "max",
         "qd": "max",
         "ppo-novelty": "max",
+        "portfolio": "max",
     }
     colours = [entry.colour for entry in TESTERS.values()]
     assert len(set(colours)) == len(colours)
@@ -53,8 +62,8 @@ def test_unknown_testers_and_parameters_are_clear_errors(name, params, message):
         ("random", {"attempts": True}, "attempts: must be a whole number, not True"),
         ("random", {"attempts": 0}, "attempts: must be a whole number >= 1, not 0"),
         ("cem", {"smoothing": math.nan}, "smoothing: must be a finite number, not nan"),
-        ("cem", {"n_workers": 1000}, "n_workers: must be from 1 to 64, not 1000"),
-        ("qd", {"bins": [8, "3", 3]}, "bins: must be a list of whole numbers"),
+        ("cem", {"n_workers": 1000}, "workers: must be less than or equal to 64, not 1000"),
+        ("qd", {"bins": [8, "3", 3]}, "bins.1: must be a valid integer, not '3'"),
         ("qd", {"bins": [1000, 1000, 3]}, "bins: must be one whole number >= 1 per measure"),
         ("ppo-max", {"learning_rate": 0}, "learning_rate: must be a number in (0, 1], not 0"),
         ("ppo-max", {"n_steps": "64"}, "n_steps: must be a whole number >= 1, not '64'"),

@@ -17,7 +17,7 @@ from hazardhunt.testers import make_tester
 from hazardhunt.testers.cem import coloured_noise
 from hazardhunt.testers.ppo import NOVELTY_CAP, NoveltyBonus
 from hazardhunt.testers.qd import DEFAULT_MEASURES
-from hazardhunt.testers.spaces import DECISION_SIZES, boundary_plans
+from hazardhunt.testers.spaces import DECISION_KINDS, DecisionSpace
 from tests.helpers import run_tables
 
 RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.json").read_text())
@@ -73,19 +73,28 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
 @pytest.mark.parametrize(
     ("tester", "params", "message"),
     [
-        ("cem", {"population": 1}, "population: must be from 2 to 10,000, not 1"),
-        ("cem", {"elite_fraction": 1.5}, "elite_fraction: must be in"),
+        ("cem", {"population": 1}, "batch_size: must be greater than or equal to 2, not 1"),
+        ("cem", {"elite_fraction": 1.5}, "elite_fraction: must be less than or equal to 1"),
         ("cem", {"populaton": 10}, "populaton: unknown parameter"),
+        ("cem", {"population": 8, "batch_size": 8}, "population: is the earlier name of"),
         ("qd", {"measures": ["bearing", "colour"]}, "measures: must be distinct names of"),
         ("qd", {"bins": [4, 4]}, "bins: must be one whole number >= 1 per measure"),
-        ("qd", {"algorithm": "nsga"}, "algorithm: must be one of cma-me, cma-mae, map-elites"),
-        ("qd", {"es": "adam"}, "es: must be one of cma_es, sep_cma_es, lm_ma_es"),
-        ("qd", {"clear_path": "yes"}, "clear_path: must be true or false, not 'yes'"),
-        ("cem", {"space": "sideways"}, "space: must be one of open, aim, route, mixed, not"),
-        ("cem", {"noise_exponent": -1}, "noise_exponent: must be a number from 0 to 4, not -1"),
+        ("qd", {"algorithm": "nsga"}, "algorithm: must be 'cma-me', 'cma-mae' or 'map-elites'"),
+        ("qd", {"es": "adam"}, "es: must be 'cma_es', 'sep_cma_es' or 'lm_ma_es'"),
+        ("qd", {"clear_path": "yes"}, "space.detour: must be a valid boolean, not 'yes'"),
+        ("cem", {"space": "sideways"}, "space.kind: must be 'open', 'aim', 'route' or 'mixed'"),
+        ("cem", {"space": {"kind": "aim", "detours": True}}, "space.detours: unknown setting"),
+        ("cem", {"noise_exponent": -1}, "noise_exponent: must be greater than or equal to 0"),
+        ("cem", {"n_workers": 65}, "workers: must be less than or equal to 64, not 65"),
         ("qd", {"aim": True}, "aim: unknown parameter"),
-        ("qd", {"probes": 1}, "probes: must be true or false, not 1"),
+        ("qd", {"probes": 1}, "space.plain_attacks: must be a valid boolean, not 1"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
+        ("portfolio", {"arms": [{"name": "a", "method": "mcts"}]}, "arms.0.method: must be one"),
+        (
+            "portfolio",
+            {"arms": [{"name": "a", "method": "cem", "params": {"batch_size": 1}}]},
+            "arms: arm 'a': batch_size: must be greater than or equal to 2, not 1",
+        ),
     ],
 )
 def test_bad_search_parameters_are_clear_errors(tester, params, message):
@@ -136,7 +145,7 @@ def test_qd_over_closed_loop_decisions_finds_failures_that_replay_from_their_act
     directory = tmp_path / "run"
     params = {"space": space, "batch_size": 4, "emitters": 3}
     assert head_on_run(directory, "qd", params, episodes=24)["episodes"] == 24
-    assert json.loads((directory / "tester" / "qd.json").read_text())["space"] == space
+    assert json.loads((directory / "tester" / "qd.json").read_text())["space"]["kind"] == space
     failures = pd.read_parquet(directory / "failures.parquet")
     assert len(failures) > 0
     for episode in failures["episode"]:
@@ -185,25 +194,25 @@ def test_cem_with_coloured_noise_searches_and_says_so(tmp_path):
     params = {"population": 6, "noise_exponent": 2, "space": "route"}
     assert head_on_run(directory, "cem", params, episodes=12)["episodes"] == 12
     settings = json.loads((directory / "tester" / "cem.json").read_text())
-    assert (settings["noise_exponent"], settings["space"]) == (2.0, "route")
+    assert (settings["noise_exponent"], settings["space"]["kind"]) == (2.0, "route")
 
 
-def test_the_boundary_plans_hold_one_decision_at_top_speed():
+def test_the_plain_attacks_hold_one_decision_at_top_speed():
     counts = {}
-    for space in DECISION_SIZES:
-        plans = boundary_plans(space, 15)
-        counts[space] = len(plans)
-        assert plans.shape[1:] == (15, DECISION_SIZES[space])
+    for kind in DECISION_KINDS:
+        plans = DecisionSpace(kind).plain_attacks(15)
+        counts[kind] = len(plans)
+        assert plans.shape[1:] == (15, DecisionSpace(kind).size)
         assert (plans[:, :, 0] == 1.0).all()
         assert (plans == plans[:, :1, :]).all()  # one decision throughout
         assert len(np.unique(plans[:, 0], axis=0)) == len(plans)  # no two alike
     assert counts == {"open": 3, "aim": 12, "route": 9}
     # Among the aimed ones: walk into the robot's left and right sides; among the route's: stand
     # on it at its goal.
-    aimed = boundary_plans("aim", 1)[:, 0].tolist()
+    aimed = DecisionSpace("aim").plain_attacks(1)[:, 0].tolist()
     assert [1.0, 0.5, -1.0] in aimed
     assert [1.0, -0.5, -1.0] in aimed
-    assert [1.0, 1.0, 0.0] in boundary_plans("route", 1)[:, 0].tolist()
+    assert [1.0, 1.0, 0.0] in DecisionSpace("route").plain_attacks(1)[:, 0].tolist()
 
 
 @pytest.mark.parametrize(
@@ -228,7 +237,7 @@ def test_the_boundary_probes_catch_a_robot_that_docks_blind(tester, params, tmp_
 
     probed = run(True, "probed")
     assert probed["failures"] > 0
-    assert probed["first_failure_episode"] < len(boundary_plans("route", 1))
+    assert probed["first_failure_episode"] < len(DecisionSpace("route").plain_attacks(1))
     settings = json.loads((tmp_path / "probed" / "tester" / f"{tester}.json").read_text())
-    assert settings["probes"] is True
+    assert settings["space"]["plain_attacks"] is True
     assert run(False, "unprobed")["failures"] == 0

@@ -626,6 +626,15 @@ def _verdict(report: _Report, results: Results) -> None:
         "index in the run, the earliest over cases and seeds) of its first failure and of the "
         "first failure of each class; blank: never.",
     )
+    arms = verdict.arms_found(results)
+    if not arms.empty:
+        report.table(
+            section,
+            "verdict_arms",
+            arms,
+            "Per portfolio run and class: the episode of its first failure of that class and "
+            "the arm of the portfolio that played it (docs/search-methods.md).",
+        )
     if findings.failures:
         _regression_commands(section, results)
     _incomplete_runs(section, results)

@@ -102,6 +102,40 @@ def testers_found(results: Results) -> pd.DataFrame:
     return table.rename_axis("found").reset_index()
 
 
+ARMS_FILE = Path("tester") / "arms.csv"
+"""Where a portfolio run records which arm played each episode."""
+
+
+def arms_found(results: Results) -> pd.DataFrame:
+    """For every run that recorded which arm of its portfolio played each episode
+    (``tester/arms.csv``, read as data): per class it found, the episode of its first failure
+    of that class and the arm that played it. Empty when no run did; a run whose file does not
+    read or does not cover its failures shows its arm as ``unknown``."""
+    columns = ["scenario", "field", "seed", "tester", "class", "episode", "arm"]
+    failures = results.failures
+    rows = []
+    for run_id, directory in zip(results.runs["run_id"], results.runs["directory"], strict=True):
+        path = Path(directory) / ARMS_FILE
+        if not path.is_file():
+            continue
+        arms = _episode_arms(path)
+        own = failures[(failures["run_id"] == run_id) & (failures["class"] != OTHER)]
+        first = own.sort_values("episode", kind="stable").drop_duplicates("class")
+        for failure in first.to_dict("records"):
+            arm = arms.get(int(failure["episode"]), "unknown")
+            rows.append([*(failure[key] for key in columns[:-1]), arm])
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _episode_arms(path: Path) -> dict[int, str]:
+    """Episode -> arm from a run's ``arms.csv``; empty if it does not read as one."""
+    try:
+        table = pd.read_csv(path, dtype={"arm": str})
+        return {int(e): str(a) for e, a in zip(table["episode"], table["arm"], strict=True)}
+    except (OSError, ValueError, KeyError, TypeError, pd.errors.ParserError):
+        return {}
+
+
 def regression_commands(directory: Path, plugins: bool) -> list[str]:
     """The commands that turn a campaign's failures into regression cases and re-run them;
     ``plugins``: some run's controller or safety layer is a plug-in, which ``regress`` imports

@@ -232,8 +232,8 @@ def run_id_of(scenario: str, field: str, tester: str, seed: int) -> str:
 def _check_tester(value: str) -> str:
     if value not in TESTERS:
         raise ValueError(
-            f"unknown tester {value!r}: use one of {', '.join(TESTERS)} or your own "
-            "(package.module:Class)"
+            f"unknown tester {value!r}: use one of {', '.join(TESTERS)}, your own "
+            "(package.module:Class), or a configuration of one with method = NAME"
         )
     return value
 
@@ -248,8 +248,6 @@ ScenarioName = Annotated[str, AfterValidator(_check_scenario)]
 """A built-in scenario name or a scenario file that loads."""
 FieldSetting = Annotated[str, Field(min_length=1)]
 """A protective-field setting: none, 1.25m, 2m or a field the scenario defines."""
-TesterName = Annotated[str, AfterValidator(_check_tester)]
-"""A registered tester (``hazardhunt.testers.TESTERS``)."""
 PluginTesterName = Annotated[str, Field(min_length=1), AfterValidator(_check_plugin_name)]
 """The name of a user's tester: any but a registered tester's."""
 
@@ -291,8 +289,9 @@ class RunConfig(_Strict):
     @field_validator("tester")
     @classmethod
     def _tester_ok(cls, value: str, info: ValidationInfo) -> str:
+        # A registered tester, or a configuration of one (checked with its parameters).
         if info.data.get("tester_plugin") is None:
-            return _check_tester(value)
+            return value
         return _check_plugin_name(value)
 
     @field_validator("tester_params")
@@ -311,6 +310,11 @@ class RunConfig(_Strict):
     def _runs_as_configured(self) -> RunConfig:
         _check_built_in_controller(self.env, self.controller)
         if self.tester_plugin is None:
+            if "method" not in self.tester_params:
+                try:
+                    _check_tester(self.tester)
+                except ValueError as error:
+                    raise invalid(("tester",), str(error), self.tester) from None
             _check_tester_for_episodes(
                 self.tester, self.tester_params, self.env, ("tester_params",)
             )
@@ -338,8 +342,10 @@ class CampaignConfig(_Strict):
     seeds: list[StrictInt] = Field(min_length=1)
     episodes: StrictInt = Field(gt=0)
     env: EnvOptions = EnvOptions()
-    tester: dict[TesterName, dict[str, Any]] = {}
-    """Per registered tester its keyword parameters, e.g. ``[tester.ppo-max]``."""
+    tester: dict[str, dict[str, Any]] = {}
+    """Per registered tester its keyword parameters, e.g. ``[tester.ppo-max]``; or a
+    configuration of a registered tester under a name of its own, e.g. ``[tester.cem-aim]``
+    with ``method = "cem"``."""
     controller: PluginSpec | None = None
     """The robot's controller of every run (``[controller]``); the built-in NMPC when None."""
     safety_layer: PluginSpec | None = None
@@ -354,18 +360,15 @@ class CampaignConfig(_Strict):
             _check_fields(scenario, values)
         return values
 
-    @field_validator("testers")
-    @classmethod
-    def _testers_known(cls, values: list[str], info: ValidationInfo) -> list[str]:
-        for name in values:
-            if name not in info.data.get("tester_plugins", {}):
-                _check_tester(name)
-        return values
-
     @field_validator("tester")
     @classmethod
     def _testers_accept_params(cls, values: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         for name, params in values.items():
+            if "method" not in params:
+                try:
+                    _check_tester(name)
+                except ValueError as error:
+                    raise invalid((name,), str(error), name) from None
             _check_tester_params(name, params, (name,))
         return values
 
@@ -381,6 +384,12 @@ class CampaignConfig(_Strict):
     @model_validator(mode="after")
     def _runs_as_configured(self) -> CampaignConfig:
         _check_built_in_controller(self.env, self.controller)
+        for index, name in enumerate(self.testers):
+            if name not in self.tester_plugins and "method" not in self.tester.get(name, {}):
+                try:
+                    _check_tester(name)
+                except ValueError as error:
+                    raise invalid(("testers", index), str(error), name) from None
         for name in self.testers:
             if name not in self.tester_plugins:
                 _check_tester_for_episodes(
@@ -445,6 +454,8 @@ def _check_tester_params(
         make_tester(tester, 0, params)  # builds no model: only checks the parameters
     except TesterParameterError as error:
         raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
+    except ValueError:
+        return  # an unknown tester: reported where it is named
 
 
 def _check_tester_for_episodes(
@@ -452,7 +463,7 @@ def _check_tester_for_episodes(
 ) -> None:
     """Raises a validation error at ``location`` + the parameter's key when the registered
     tester ``tester`` cannot search episodes of this length (its ``check_horizon``)."""
-    if tester not in TESTERS:
+    if tester not in TESTERS and "method" not in params:
         return
     built = make_tester(tester, 0, params)
     check = getattr(built, "check_horizon", None)

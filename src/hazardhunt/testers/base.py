@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, TypeGuard, runtime_checkable
@@ -17,11 +15,9 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
-from hazardhunt.testers.spaces import play_in_space
-
-MAX_WORKER_PROCESSES = 64
-"""The most worker processes one run's tester may start (PPO's ``n_envs``, the searchers'
-``n_workers``): each holds a simulation and its own interpreter, some hundred MiB."""
+from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES as MAX_WORKER_PROCESSES
+from hazardhunt.testers.evaluator import EpisodeEvaluator, Plan
+from hazardhunt.testers.spaces import DECISION_KINDS, DecisionSpace
 
 
 class TesterParameterError(ValueError):
@@ -102,8 +98,7 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         self.keep_trajectory = keep_trajectory
         self.simulation_factory = simulation_factory
         self.episodes_done = 0
-        self._pool: ProcessPoolExecutor | None = None
-        self._pool_size = 0
+        self._evaluator: EpisodeEvaluator | None = None
 
     @property
     def simulation(self) -> Simulation:
@@ -147,41 +142,30 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
     ) -> list[EpisodeResult]:
         """Play whole episodes' decisions and record them, in order, as the run's next episodes.
 
+        Kept for testers written before the
+        :class:`~hazardhunt.testers.evaluator.EpisodeEvaluator`, which a tester should use
+        instead.
+
         Args:
-            sequences: Each up to :attr:`horizon` decisions in ``space``: normalised actions
-                played open loop by default.
-            workers: Worker processes that play the batch at once, each with its own copy of
-                the simulation (kept for the recorder's life); 1 plays it here. The results do
-                not depend on it: every episode is deterministic.
-            clear_path: Whether each action that would walk the human into a static obstacle
-                is replaced by the nearest one that does not, as it is played
-                (:func:`~hazardhunt.testers.clear_path.clear_action`).
-            space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`):
-                ``open``, ``aim`` or ``route``.
+            sequences: Each up to :attr:`horizon` decisions in ``space``.
+            workers: Worker processes that play the batch at once (kept for the recorder's life).
+            clear_path: The decision space's ``detour``.
+            space: The decision space's kind: ``open``, ``aim`` or ``route``.
         """
-        arrays = [np.asarray(a) for a in sequences]
-        if workers <= 1 or len(arrays) <= 1:
-            keep = self.keep_trajectory
-            results = [play_in_space(self.simulation, a, space, keep, clear_path) for a in arrays]
-        else:
-            if self._pool is None or self._pool_size != workers:
-                self.close_pool()
-                source = self.simulation_factory or self.simulation
-                self._pool = _episode_pool(source, self.keep_trajectory, workers)
-                self._pool_size = workers
-            count = len(arrays)
-            results = list(
-                self._pool.map(_play_in_worker, arrays, [clear_path] * count, [space] * count)
-            )
-        for result in results:
-            self.record(result)
-        return results
+        if space not in DECISION_KINDS:
+            raise ValueError(f"unknown search space {space!r}: one of {', '.join(DECISION_KINDS)}")
+        if self._evaluator is None or self._evaluator.workers != workers:
+            self.close_pool()
+            self._evaluator = EpisodeEvaluator(self, workers)
+        decision_space = DecisionSpace(space, clear_path)
+        plans = [Plan(decision_space, np.asarray(decisions)) for decisions in sequences]
+        return self._evaluator.evaluate(plans)
 
     def close_pool(self) -> None:
         """Stop the worker processes of :meth:`evaluate_batch`, if any."""
-        if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
-            self._pool = None
+        if self._evaluator is not None:
+            self._evaluator.close()
+            self._evaluator = None
 
     def close(self) -> None:
         self.close_pool()
@@ -218,39 +202,6 @@ class Tester(Protocol):
     def save(self, directory: Path) -> None:
         """Write whatever the tester learned (e.g. a policy checkpoint) into ``directory``."""
         ...
-
-
-# The worker's simulation: a spawned process receives it once, at start-up.
-_worker_simulation: tuple[Simulation, Callable[[EpisodeSummary], bool]] | None = None
-
-
-SimulationSource = Simulation | Callable[[], Simulation]
-"""A simulation, or what builds one in a worker process."""
-
-
-def _episode_pool(
-    source: SimulationSource, keep_trajectory: Callable[[EpisodeSummary], bool], workers: int
-) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_start_worker,
-        initargs=(source, keep_trajectory),
-    )
-
-
-def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], bool]) -> None:
-    global _worker_simulation
-    simulation = source if isinstance(source, Simulation) else source()
-    _worker_simulation = (simulation, keep)
-
-
-def _play_in_worker(
-    decisions: NDArray[np.floating[Any]], clear_path: bool, space: str
-) -> EpisodeResult:
-    assert _worker_simulation is not None, "the worker was not started with a simulation"
-    simulation, keep = _worker_simulation
-    return play_in_space(simulation, decisions, space, keep, clear_path)
 
 
 def reward_of(tester: Tester) -> RewardKind:

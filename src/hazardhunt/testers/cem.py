@@ -1,213 +1,159 @@
-"""The cross-entropy method over a whole episode's action sequence, with restarts.
+"""The cross-entropy method over a whole episode's decisions, with restarts.
 
 The rare-event baseline of adaptive stress testing (Rubinstein's cross-entropy method, as the AST
-Toolbox uses it): an episode is one point, the human's open-loop sequence of ``horizon``
-decisions; a Gaussian over those sequences (one mean and one standard deviation per decision
-and per action entry) is sampled, the best ``elite_fraction`` of each batch refit it, smoothed.
-The score of an episode is its maximum risk: 100 to 200 for an unsafe contact, otherwise
-exp(-clearance) while the robot moves, so a near miss already points towards a failure.
+Toolbox uses it): an episode is one point, the human's sequence of ``horizon`` decisions; a
+Gaussian over those sequences (one mean and one standard deviation per decision and per number)
+is sampled, the best ``elite_fraction`` of each batch refit it, smoothed. The score of an
+episode is its maximum risk: 100 to 200 for an unsafe contact, otherwise exp(-clearance) while
+the robot moves, so a near miss already points towards a failure.
 
 Plain CEM converges onto one failure and then finds it again and again. Here a failure scores
 by how far its descriptor (:mod:`hazardhunt.spec.descriptors`) lies from the failures found
 before it, so a known mechanism earns less than a new one; and once the search has converged
-(its spread below ``min_std``) or has found nothing new for ``patience`` batches, it restarts
-from a fresh random mean, away from the mechanisms it already has.
+(its spread below ``min_spread``) or has found nothing new for ``patience`` batches, it
+restarts from a fresh random mean, away from the mechanisms it already has.
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
+from hazardhunt.sim.simulation import EpisodeResult
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.base import MAX_WORKER_PROCESSES, EpisodeRecorder, check_parameters
+from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.novelty import FailureArchive
-from hazardhunt.testers.spaces import (
-    DECISION_SIZES,
-    SPACE_CHOICES,
-    boundary_plans,
-    searched_spaces,
-)
+from hazardhunt.testers.search import SearchContext, SearchTester, SpaceParams
+from hazardhunt.testers.spaces import DecisionSpace
 
-MAX_POPULATION = 10_000
+MAX_BATCH = 10_000
 """The largest batch: the weights of its elites are kept in memory from the start."""
 
 COLLISION_SCORE = 100.0
 """The score of a failure that repeats a known mechanism; a new one scores up to twice it."""
 
 
-class CrossEntropyTester:
-    """The cross-entropy method with novelty-scored failures and restarts."""
+class CrossEntropyParams(SpaceParams):
+    """The cross-entropy method's settings."""
 
-    name = "cem"
+    batch_size: int = Field(default=20, ge=2, le=MAX_BATCH)
+    """Episodes per batch (``population`` in earlier versions)."""
+    elite_fraction: float = Field(default=0.25, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Share of a batch that refits the Gaussian."""
+    smoothing: float = Field(default=0.9, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Weight of the elites' mean and spread against the previous ones."""
+    initial_spread: float = Field(default=0.6, gt=0.0, allow_inf_nan=False)
+    """Standard deviation of every number at the start and at a restart."""
+    min_spread: float = Field(default=0.03, ge=0.0, allow_inf_nan=False)
+    """Mean standard deviation below which the search has converged and restarts."""
+    patience: int = Field(default=8, ge=1)
+    """Batches without a new failure mechanism after which it restarts."""
+    novelty_radius: float = Field(default=0.4, gt=0.0, allow_inf_nan=False)
+    """Descriptor distance from the known failures at which a failure counts as a new
+    mechanism (1 separates opposite sides of the robot or another history of the safety
+    layer)."""
+    noise_exponent: float = Field(default=0.0, ge=0.0, le=4.0, allow_inf_nan=False)
+    """How the sampling noise is correlated over an episode's decisions (iCEM's coloured noise,
+    Pinneri et al. 2020): 0 draws every decision independently, larger exponents give smoother
+    sequences (2: a random walk's spectrum), in which a human keeps to one plan for longer."""
+
+
+class CrossEntropySampler:
+    """One Gaussian per decision space, their batches taking turns; failures found in one
+    space count as known in the others."""
 
     def __init__(
         self,
-        seed: int,
-        population: int = 20,
-        elite_fraction: float = 0.25,
-        smoothing: float = 0.9,
-        initial_std: float = 0.6,
-        min_std: float = 0.03,
-        patience: int = 8,
-        novelty_radius: float = 0.4,
-        n_workers: int = 1,
-        clear_path: bool = False,
-        space: str = "open",
-        noise_exponent: float = 0.0,
-        probes: bool = False,
+        params: CrossEntropyParams,
+        context: SearchContext,
+        archive: FailureArchive | None = None,
     ) -> None:
-        """This is long because it checks every parameter, so that an error names the one at fault.
-
-        Args:
-        seed: Seeds the sampling.
-        population: Episodes per batch.
-        elite_fraction: Share of a batch that refits the Gaussian.
-        smoothing: Weight of the elites' mean and spread against the previous ones.
-        initial_std: Standard deviation of every action entry at the start and at a restart.
-        min_std: Mean standard deviation below which the search has converged and restarts.
-        patience: Batches without a new failure mechanism after which it restarts.
-        novelty_radius: Descriptor distance from the known failures at which a failure counts
-            as a new mechanism (1 separates opposite sides of the robot or another history of
-            the safety layer).
-        n_workers: Processes that play each batch (1: in the run's own process).
-        clear_path: Whether an action that would walk the human into a wall or shelf is
-            played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
-        space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`): ``open``
-            (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
-            or ``mixed``: one Gaussian per space, their batches taking turns, the failures
-            found in one space scoring the others' as known.
-        noise_exponent: How the sampling noise is correlated over an episode's decisions
-            (iCEM's coloured noise, Pinneri et al. 2020): 0 draws every decision
-            independently, larger exponents give smoother sequences (2: a random walk's
-            spectrum), in which a human keeps to one plan for longer.
-        probes: Whether each space's first batch starts with the space's boundary values
-            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 12 and 9 episodes).
-
-        Raises:
-            TesterParameterError: A parameter out of its range.
+        """Args:
+        params: The settings.
+        context: The run's seed and episodes.
+        archive: The failures that count as known (shared with other samplers); a new one
+            by default.
         """
-        checks = {
-            "population": (
-                population,
-                f"from 2 to {MAX_POPULATION:,}",
-                2 <= population <= MAX_POPULATION,
-            ),
-            "elite_fraction": (elite_fraction, "in (0, 1]", 0.0 < elite_fraction <= 1.0),
-            "smoothing": (smoothing, "in (0, 1]", 0.0 < smoothing <= 1.0),
-            "initial_std": (initial_std, "> 0", initial_std > 0.0),
-            "min_std": (min_std, ">= 0", min_std >= 0.0),
-            "patience": (patience, ">= 1", patience >= 1),
-            "novelty_radius": (novelty_radius, "> 0", novelty_radius > 0.0),
-            "n_workers": (
-                n_workers,
-                f"from 1 to {MAX_WORKER_PROCESSES}",
-                1 <= n_workers <= MAX_WORKER_PROCESSES,
-            ),
-            "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
-            "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
-            "probes": (probes, "true or false", isinstance(probes, bool)),
-            "noise_exponent": (
-                noise_exponent,
-                "a number from 0 to 4",
-                isinstance(noise_exponent, int | float)
-                and not isinstance(noise_exponent, bool)
-                and 0.0 <= noise_exponent <= 4.0,
-            ),
-        }
-        check_parameters(self.name, checks)
-        self.seed = seed
-        self.population = population
-        self.elites = max(1, round(elite_fraction * population))
-        ranks = np.log(self.elites + 0.5) - np.log(np.arange(1, self.elites + 1))
+        self.params = params
+        self.rng = np.random.default_rng(context.seed)
+        self.horizon = context.horizon
+        self.searches = [
+            _Search(space, context.horizon, params.initial_spread)
+            for space in params.space.decision_spaces
+        ]
+        self.archive = archive if archive is not None else FailureArchive(neighbours=1)
+        elites = max(1, round(params.elite_fraction * params.batch_size))
+        ranks = np.log(elites + 0.5) - np.log(np.arange(1, elites + 1))
         self.weights = ranks / ranks.sum()
-        self.smoothing = smoothing
-        self.initial_std = initial_std
-        self.min_std = min_std
-        self.patience = patience
-        self.novelty_radius = novelty_radius
-        self.n_workers = n_workers
-        self.clear_path = clear_path
-        self.space = space
-        self.noise_exponent = float(noise_exponent)
-        self.probes = probes
+        self.batches = 0
         self.restarts = 0
+        self._samples: NDArray[np.float64] | None = None
 
-    def explore(self, env: EpisodeRecorder, episodes: int) -> None:
-        rng = np.random.default_rng(self.seed)
-        spaces = searched_spaces(self.space)
-        shapes = {space: (env.horizon, DECISION_SIZES[space]) for space in spaces}
-        searches = {
-            space: _Search(np.zeros(shape), np.full(shape, self.initial_std))
-            for space, shape in shapes.items()
-        }
-        archive = FailureArchive(neighbours=1)
-        turn = 0
-        while env.episodes_done < episodes:
-            space = spaces[turn % len(spaces)]
-            search, shape, turn = searches[space], shapes[space], turn + 1
-            count = min(self.population, episodes - env.episodes_done)
-            noise = coloured_noise(rng, (count, *shape), self.noise_exponent)
-            samples = np.clip(search.mean + search.std * noise, -1.0, 1.0)
-            if self.probes and turn <= len(spaces):
-                plans = boundary_plans(space, env.horizon)[:count]
-                samples[: len(plans)] = plans
-            results = env.evaluate_batch(list(samples), self.n_workers, self.clear_path, space)
-            if env.episodes_done >= episodes:
-                break  # the budget is spent: nothing left to refit the Gaussian for
-            scores, novel = self._scores([r.summary for r in results], archive)
-            # The elites, best first, weighted by rank as CMA-ES weights its parents.
-            elite = samples[np.argsort(scores, kind="stable")[::-1][: self.elites]]
-            elite_mean = np.tensordot(self.weights, elite, axes=1)
-            elite_std = np.sqrt(np.tensordot(self.weights, (elite - elite_mean) ** 2, axes=1))
-            search.mean = self.smoothing * elite_mean + (1 - self.smoothing) * search.mean
-            search.std = self.smoothing * elite_std + (1 - self.smoothing) * search.std
-            search.stale = 0 if novel else search.stale + 1
-            if search.std.mean() < self.min_std or search.stale >= self.patience:
-                # Away from what it has: a fresh mean, and known failures score less.
-                search.mean = rng.uniform(-0.6, 0.6, shape)
-                search.std, search.stale = np.full(shape, self.initial_std), 0
-                self.restarts += 1
+    @property
+    def search(self) -> _Search:
+        """The Gaussian whose turn it is."""
+        return self.searches[self.batches % len(self.searches)]
 
-    def _scores(
-        self, summaries: list[EpisodeSummary], archive: FailureArchive
-    ) -> tuple[NDArray[np.float64], bool]:
+    def ask(self) -> list[Plan]:
+        search, count = self.search, self.params.batch_size
+        noise = coloured_noise(self.rng, (count, *search.mean.shape), self.params.noise_exponent)
+        samples = np.clip(search.mean + search.std * noise, -1.0, 1.0)
+        if self.params.space.plain_attacks and self.batches < len(self.searches):
+            plans = search.space.plain_attacks(self.horizon)[:count]
+            samples[: len(plans)] = plans
+        self._samples = samples
+        return [Plan(search.space, decisions) for decisions in samples]
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        assert self._samples is not None, "tell() before ask()"
+        search, samples = self.search, self._samples[: len(results)]
+        self.batches += 1
+        scores, novel = self._scores([result.summary for result in results])
+        # The elites, best first, weighted by rank as CMA-ES weights its parents.
+        weights = self.weights[: len(samples)] / self.weights[: len(samples)].sum()
+        elite = samples[np.argsort(scores, kind="stable")[::-1][: len(weights)]]
+        elite_mean = np.tensordot(weights, elite, axes=1)
+        elite_std = np.sqrt(np.tensordot(weights, (elite - elite_mean) ** 2, axes=1))
+        smoothing = self.params.smoothing
+        search.mean = smoothing * elite_mean + (1 - smoothing) * search.mean
+        search.std = smoothing * elite_std + (1 - smoothing) * search.std
+        search.stale = 0 if novel else search.stale + 1
+        if search.std.mean() < self.params.min_spread or search.stale >= self.params.patience:
+            # Away from what it has: a fresh mean, and known failures score less.
+            search.mean = self.rng.uniform(-0.6, 0.6, search.mean.shape)
+            search.std = np.full(search.mean.shape, self.params.initial_spread)
+            search.stale = 0
+            self.restarts += 1
+
+    def _scores(self, summaries: list[EpisodeSummary]) -> tuple[NDArray[np.float64], bool]:
         """Each episode's score, and whether the batch found a new failure mechanism."""
-        scores, novel = [], False
+        scores, novel, radius = [], False, self.params.novelty_radius
         for summary in summaries:
             if summary.outcome != "failure":
                 scores.append(summary.max_risk)
                 continue
-            distance = archive.novelty(summary)
-            novel = novel or distance >= self.novelty_radius
-            scores.append(COLLISION_SCORE * (1.0 + min(1.0, distance / self.novelty_radius)))
-            archive.add(summary)
+            distance = self.archive.novelty(summary)
+            novel = novel or distance >= radius
+            scores.append(COLLISION_SCORE * (1.0 + min(1.0, distance / radius)))
+            self.archive.add(summary)
         return np.asarray(scores), novel
 
-    def save(self, directory: Path) -> None:
-        """The sampler's settings and how often it restarted."""
-        directory.mkdir(parents=True, exist_ok=True)
-        settings = {
-            "tester": self.name,
-            "seed": self.seed,
-            "population": self.population,
-            "elites": self.elites,
-            "smoothing": self.smoothing,
-            "initial_std": self.initial_std,
-            "min_std": self.min_std,
-            "patience": self.patience,
-            "novelty_radius": self.novelty_radius,
-            "clear_path": self.clear_path,
-            "space": self.space,
-            "noise_exponent": self.noise_exponent,
-            "probes": self.probes,
-            "restarts": self.restarts,
-        }
-        (directory / "cem.json").write_text(json.dumps(settings, indent=2) + "\n")
+    def record(self) -> dict[str, Any]:
+        return {"restarts": self.restarts}
+
+
+class CrossEntropyTester(SearchTester):
+    """The cross-entropy method with novelty-scored failures and restarts."""
+
+    name = "cem"
+    params_model = CrossEntropyParams
+    params: CrossEntropyParams
+
+    def make_sampler(self, context: SearchContext) -> CrossEntropySampler:
+        return CrossEntropySampler(self.params, context)
 
 
 def coloured_noise(
@@ -236,11 +182,11 @@ def coloured_noise(
     return np.moveaxis(noise[..., :decisions] / spread, 1, 2)
 
 
-@dataclass
 class _Search:
-    """One Gaussian over a search space's decision sequences, and how long it found nothing
-    new."""
+    """One Gaussian over a decision space's sequences, and how long it found nothing new."""
 
-    mean: NDArray[np.float64]
-    std: NDArray[np.float64]
-    stale: int = 0
+    def __init__(self, space: DecisionSpace, horizon: int, spread: float) -> None:
+        self.space = space
+        self.mean = np.zeros((horizon, space.size))
+        self.std = np.full((horizon, space.size), spread)
+        self.stale = 0

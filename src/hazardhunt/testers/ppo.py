@@ -28,12 +28,12 @@ from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.sut.guard import is_finite_number
 from hazardhunt.testers.base import (
-    MAX_WORKER_PROCESSES,
     EpisodeRecorder,
     TesterParameterError,
     check_parameters,
     is_whole_number,
 )
+from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES
 from hazardhunt.testers.novelty import FailureArchive
 
 NOVELTY_CAP = 1.5

@@ -15,32 +15,20 @@ The run keeps the archive (``tester/archive.parquet``); the report draws it as a
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+from pydantic import Field, model_validator
 
 from hazardhunt.sim.simulation import EpisodeResult
 from hazardhunt.spec.descriptors import MEASURE_NAMES, MEASURE_RANGES, measures_of
-from hazardhunt.testers.base import (
-    MAX_WORKER_PROCESSES,
-    EpisodeRecorder,
-    TesterParameterError,
-    check_parameters,
-)
-from hazardhunt.testers.spaces import (
-    DECISION_SIZES,
-    SPACE_CHOICES,
-    boundary_plans,
-    searched_spaces,
-)
-
-ALGORITHMS = ("cma-me", "cma-mae", "map-elites")
+from hazardhunt.testers.base import TesterParameterError
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.search import SearchContext, SearchTester, SpaceParams
 
 MAX_CELLS = 1_000_000
 """The most cells of the archive, which allocates them all at the start."""
@@ -58,277 +46,228 @@ MAX_STATE_BYTES = 2 * 1024**3
 before it starts rather than killed for memory once it has."""
 
 
-class QualityDiversityTester:
-    """CMA-ME / CMA-MAE emitters over an archive of failure descriptors."""
+class QualityDiversityParams(SpaceParams):
+    """Quality-diversity search's settings."""
 
-    name = "qd"
+    measures: tuple[str, ...] = DEFAULT_MEASURES
+    """The entries that span the archive (of ``bearing``, ``robot_speed``, ``emergency_stop``,
+    ``route_share``, ``human_speed``; :mod:`hazardhunt.spec.descriptors`)."""
+    bins: tuple[int, ...] = (8, 3, 3)
+    """Cells along each measure."""
+    algorithm: Literal["cma-me", "cma-mae", "map-elites"] = "cma-me"
+    """``cma-me``, ``cma-mae``, or ``map-elites`` (Gaussian mutation of archive elites, started
+    from uniformly random sequences)."""
+    emitters: int = Field(default=2, ge=1, le=MAX_EMITTERS)
+    """Emitters (CMA-ES ones, or Gaussian ones for ``map-elites``); with a ``mixed`` space they
+    take the decision spaces in turn (the first ``open``, the second ``aim``, ...)."""
+    batch_size: int = Field(default=10, ge=1, le=MAX_BATCH)
+    """Episodes each emitter asks for per iteration."""
+    initial_spread: float = Field(default=0.6, gt=0.0, allow_inf_nan=False)
+    """The emitters' initial step size, or the mutation's spread for ``map-elites``
+    (``sigma0`` in earlier versions)."""
+    learning_rate: float = Field(default=0.02, gt=0.0, le=1.0, allow_inf_nan=False)
+    """CMA-MAE's archive learning rate (``cma-mae`` only)."""
+    es: Literal["cma_es", "sep_cma_es", "lm_ma_es"] = "cma_es"
+    """The emitters' evolution strategy: ``cma_es`` (a full covariance over the whole
+    sequence, memory growing with its square), ``sep_cma_es`` (diagonal) or ``lm_ma_es``
+    (limited memory), for long episodes with many decisions."""
 
-    def __init__(
-        self,
-        seed: int,
-        measures: Sequence[str] = DEFAULT_MEASURES,
-        bins: Sequence[int] = (8, 3, 3),
-        algorithm: str = "cma-me",
-        emitters: int = 2,
-        batch_size: int = 10,
-        sigma0: float = 0.6,
-        learning_rate: float = 0.02,
-        es: str = "cma_es",
-        n_workers: int = 1,
-        clear_path: bool = False,
-        space: str = "open",
-        probes: bool = False,
-    ) -> None:
-        """This is long because it checks every parameter, so that an error names the one at fault.
+    @model_validator(mode="before")
+    @classmethod
+    def _lists(cls, data: Any) -> Any:
+        """A file's lists are the tuples of the model."""
+        if isinstance(data, dict):
+            return {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return data
 
-        Args:
-        seed: Seeds the archive and the emitters.
-        measures: The entries that span the archive (of ``bearing``, ``robot_speed``,
-            ``emergency_stop``, ``route_share``, ``human_speed``;
-            :mod:`hazardhunt.spec.descriptors`).
-        bins: Cells along each measure.
-        algorithm: ``cma-me``, ``cma-mae``, or ``map-elites`` (Gaussian mutation of archive
-            elites, started from uniformly random sequences).
-        emitters: Emitters (CMA-ES ones, or Gaussian ones for ``map-elites``).
-        batch_size: Episodes each emitter asks for per iteration.
-        sigma0: The emitters' initial step size, or the mutation's spread for ``map-elites``
-            (actions are in [-1, 1]).
-        learning_rate: CMA-MAE's archive learning rate (``cma-mae`` only).
-        es: The emitters' evolution strategy: ``cma_es`` (a full covariance over the whole
-            action sequence, memory growing with its square), ``sep_cma_es`` (diagonal) or
-            ``lm_ma_es`` (limited memory), for long episodes with many decisions.
-        n_workers: Processes that play each batch (1: in the run's own process).
-        clear_path: Whether an action that would walk the human into a wall or shelf is
-            played as the nearest one that does not (:mod:`hazardhunt.testers.clear_path`).
-        space: What a decision's numbers mean (:mod:`hazardhunt.testers.spaces`): ``open``
-            (speed, turn rate), ``aim`` (at the robot), ``route`` (at a point of its route),
-            or ``mixed``: the emitters take the spaces in turn (the first ``open``, the
-            second ``aim``, the third ``route``, ...) and fill one archive.
-        probes: Whether the search starts with its spaces' boundary values, into the archive
-            (:func:`~hazardhunt.testers.spaces.boundary_plans`: 3, 12 and 9 episodes).
+    @model_validator(mode="after")
+    def _grid(self) -> QualityDiversityParams:
+        known = set(self.measures) <= set(MEASURE_NAMES)
+        if not (known and len(set(self.measures)) == len(self.measures) > 0):
+            raise ValueError(f"measures: must be distinct names of {', '.join(MEASURE_NAMES)}")
+        if len(self.bins) != len(self.measures) or math.prod(self.bins) > MAX_CELLS:
+            raise ValueError(
+                f"bins: must be one whole number >= 1 per measure, at most {MAX_CELLS:,} cells "
+                "in all"
+            )
+        if any(b < 1 for b in self.bins):
+            raise ValueError("bins: must be one whole number >= 1 per measure")
+        return self
 
-        Raises:
-            TesterParameterError: An unknown measure or algorithm, or a setting out of its
-                range.
-        """
-        measures, bins = list(measures), list(bins)
-        known = set(measures) <= set(MEASURE_NAMES)
-        checks = {
-            "measures": (
-                measures,
-                f"distinct names of {', '.join(MEASURE_NAMES)}",
-                known and len(set(measures)) == len(measures) > 0,
-            ),
-            "bins": (
-                bins,
-                f"one whole number >= 1 per measure, at most {MAX_CELLS:,} cells in all",
-                len(bins) == len(measures)
-                and all(b >= 1 for b in bins)
-                and math.prod(bins) <= MAX_CELLS,
-            ),
-            "algorithm": (algorithm, f"one of {', '.join(ALGORITHMS)}", algorithm in ALGORITHMS),
-            "es": (es, f"one of {', '.join(EVOLUTION_STRATEGIES)}", es in EVOLUTION_STRATEGIES),
-            "emitters": (emitters, f"from 1 to {MAX_EMITTERS}", 1 <= emitters <= MAX_EMITTERS),
-            "batch_size": (batch_size, f"from 1 to {MAX_BATCH:,}", 1 <= batch_size <= MAX_BATCH),
-            "sigma0": (sigma0, "> 0", sigma0 > 0),
-            "learning_rate": (learning_rate, "in (0, 1]", 0 < learning_rate <= 1),
-            "n_workers": (
-                n_workers,
-                f"from 1 to {MAX_WORKER_PROCESSES}",
-                1 <= n_workers <= MAX_WORKER_PROCESSES,
-            ),
-            "clear_path": (clear_path, "true or false", isinstance(clear_path, bool)),
-            "space": (space, f"one of {', '.join(SPACE_CHOICES)}", space in SPACE_CHOICES),
-            "probes": (probes, "true or false", isinstance(probes, bool)),
-        }
-        check_parameters(self.name, checks)
-        self.seed = seed
-        self.measures = measures
-        self.bins = [int(b) for b in bins]
-        self.algorithm = algorithm
-        self.emitters = emitters
-        self.batch_size = batch_size
-        self.sigma0 = sigma0
-        self.learning_rate = learning_rate
-        self.es = es
-        self.n_workers = n_workers
-        self.clear_path = clear_path
-        self.space = space
-        self.probes = probes
-        self.archive: Any = None
 
-    @property
-    def decision_size(self) -> int:
-        """Numbers per decision in a searched sequence (with ``mixed`` the largest space's; an
-        open-loop decision reads the first two)."""
-        if self.space == "mixed":
-            return max(DECISION_SIZES.values())
-        return DECISION_SIZES[self.space]
+class QualityDiversitySampler:
+    """pyribs' scheduler over the human's decision sequences; with a ``mixed`` space, one
+    archive that every decision space fills."""
 
-    def explore(self, env: EpisodeRecorder, episodes: int) -> None:
-        scheduler = self._scheduler(env)
-        if self.probes:
-            self._probe(env, scheduler, episodes)
-        while env.episodes_done < episodes:
-            solutions = scheduler.ask()
-            left = episodes - env.episodes_done
-            results = self._play(env, solutions[:left])
-            objective = [result.summary.max_risk for result in results]
-            measures = [measures_of(result.summary, self.measures) for result in results]
-            if len(results) < len(solutions):
-                # The budget ends within this batch: the archive keeps what it played.
-                self.archive.add(solutions[: len(results)], objective, measures)
-                break
-            scheduler.tell(objective, measures)
+    def __init__(self, params: QualityDiversityParams, context: SearchContext) -> None:
+        self.params = params
+        self.seed = context.seed
+        self.horizon = context.horizon
+        self.spaces = params.space.decision_spaces
+        self.decision_size = params.space.largest_size
+        self.scheduler = self._scheduler(context)
+        self.archive: Any = self.scheduler.result_archive
+        # The plain attacks of each space first, one batch each, into the archive(s).
+        self._attacks = list(self.spaces) if params.space.plain_attacks else []
+        self._asked: NDArray[np.float64] | None = None
+        self._attacking = False
 
-    def _probe(self, env: EpisodeRecorder, scheduler: Any, episodes: int) -> None:
-        """Play the boundary values of every space searched into the archive(s)."""
-        for space in searched_spaces(self.space):
-            plans = boundary_plans(space, env.horizon)[: episodes - env.episodes_done]
-            if len(plans) == 0:
-                return
-            results = env.evaluate_batch(list(plans), self.n_workers, self.clear_path, space)
-            solutions = np.zeros((len(plans), env.horizon, self.decision_size))
-            solutions[:, :, : plans.shape[2]] = plans
-            objective = [result.summary.max_risk for result in results]
-            measures = [measures_of(result.summary, self.measures) for result in results]
-            archives = [scheduler.archive]
-            if scheduler.result_archive is not scheduler.archive:
-                archives.append(scheduler.result_archive)  # CMA-MAE's
-            for archive in archives:
-                archive.add(solutions.reshape(len(plans), -1), objective, measures)
+    def ask(self) -> list[Plan]:
+        if self._attacks:
+            space = self._attacks.pop(0)
+            attacks = space.plain_attacks(self.horizon)
+            solutions = np.zeros((len(attacks), self.horizon, self.decision_size))
+            solutions[:, :, : space.size] = attacks
+            self._asked, self._attacking = solutions.reshape(len(attacks), -1), True
+            return [Plan(space, plan) for plan in attacks]
+        self._asked, self._attacking = self.scheduler.ask(), False
+        decisions = self._asked.reshape(len(self._asked), self.horizon, self.decision_size)
+        batch = self.params.batch_size
+        # Each emitter's batch in its decision space, the emitters taking the spaces in turn.
+        return [
+            Plan(space, sequence[:, : space.size])
+            for index, sequence in enumerate(decisions)
+            for space in (self.spaces[(index // batch) % len(self.spaces)],)
+        ]
 
-    def _play(self, env: EpisodeRecorder, solutions: NDArray[np.float64]) -> list[EpisodeResult]:
-        """Play the emitters' solutions, in order, each emitter's batch in its space."""
-        if self.space != "mixed":
-            decisions = solutions.reshape(len(solutions), env.horizon, self.decision_size)
-            return env.evaluate_batch(list(decisions), self.n_workers, self.clear_path, self.space)
-        results: list[EpisodeResult] = []
-        spaces = searched_spaces(self.space)
-        for start in range(0, len(solutions), self.batch_size):
-            emitter = start // self.batch_size
-            space = spaces[emitter % len(spaces)]
-            batch = solutions[start : start + self.batch_size]
-            decisions = batch.reshape(len(batch), env.horizon, self.decision_size)
-            decisions = decisions[:, :, : DECISION_SIZES[space]]
-            results += env.evaluate_batch(list(decisions), self.n_workers, self.clear_path, space)
-        return results
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        assert self._asked is not None, "tell() before ask()"
+        names = self.params.measures
+        objective = [result.summary.max_risk for result in results]
+        measures = [measures_of(result.summary, names) for result in results]
+        solutions = self._asked[: len(results)]
+        if self._attacking or len(results) < len(self._asked):
+            # Not the emitters' batch, or the budget ended within it: into the archive(s).
+            archives = {id(a): a for a in (self.scheduler.archive, self.archive)}
+            for archive in archives.values():
+                archive.add(solutions, objective, measures)
+        else:
+            self.scheduler.tell(objective, measures)
 
-    def _scheduler(self, env: EpisodeRecorder) -> Any:
+    def record(self) -> dict[str, Any]:
+        return {"cells_filled": len(self.archive)}
+
+    def archive_table(self) -> pd.DataFrame:
+        """The archive: one row per filled cell, its measures, objective (the episode's
+        maximum risk) and the cell's index."""
+        data = self.archive.data(["index", "objective", "measures"], return_type="pandas")
+        table: pd.DataFrame = data.rename(
+            columns={f"measures_{i}": name for i, name in enumerate(self.params.measures)}
+        )
+        return table
+
+    def _scheduler(self, context: SearchContext) -> Any:
         from ribs.archives import GridArchive
         from ribs.emitters import EvolutionStrategyEmitter
         from ribs.schedulers import Scheduler
 
+        params, seed = self.params, self.seed
         ranges = {
             **MEASURE_RANGES,
-            "robot_speed": (0.0, env.simulation.robot_params.max_speed),
-            "human_speed": (0.0, env.simulation.human_params.max_speed),
+            "robot_speed": (0.0, context.simulation.robot_params.max_speed),
+            "human_speed": (0.0, context.simulation.human_params.max_speed),
         }
-        dimension = env.horizon * self.decision_size
-        self.check_horizon(env.horizon)
-        grid: dict[str, Any] = {"dims": self.bins, "ranges": [ranges[m] for m in self.measures]}
-        self.archive = GridArchive(solution_dim=dimension, seed=self.seed, **grid)
-        archive, ranker = self.archive, "2imp"
-        if self.algorithm == "cma-mae":
+        dimension = self.horizon * self.decision_size
+        grid: dict[str, Any] = {
+            "dims": list(params.bins),
+            "ranges": [ranges[m] for m in params.measures],
+        }
+        result_archive = GridArchive(solution_dim=dimension, seed=seed, **grid)
+        archive, ranker = result_archive, "2imp"
+        if params.algorithm == "cma-mae":
             archive = GridArchive(
                 solution_dim=dimension,
-                learning_rate=self.learning_rate,
+                learning_rate=params.learning_rate,
                 threshold_min=0.0,
-                seed=self.seed,
+                seed=seed,
                 **grid,
             )
             ranker = "imp"
-        if self.algorithm == "map-elites":
+        if params.algorithm == "map-elites":
             return Scheduler(archive, self._gaussian_emitters(archive, dimension))
         emitters = [
             EvolutionStrategyEmitter(
                 archive,
                 x0=np.zeros(dimension),
-                sigma0=self.sigma0,
+                sigma0=params.initial_spread,
                 ranker=ranker,
-                es=self.es,
+                es=params.es,
                 # No bounds: CMA-ES would resample until a whole sequence lies in [-1, 1]; the
                 # simulation clips every action instead, as it does for any tester.
-                batch_size=self.batch_size,
+                batch_size=params.batch_size,
+                seed=seed * 1000 + index,
+            )
+            for index in range(params.emitters)
+        ]
+        separate = result_archive if archive is not result_archive else None
+        return Scheduler(archive, emitters, result_archive=separate)
+
+    def _gaussian_emitters(self, archive: Any, dimension: int) -> list[Any]:
+        from ribs.emitters import GaussianEmitter
+
+        params = self.params
+        rng = np.random.default_rng(self.seed)
+        return [
+            GaussianEmitter(
+                archive,
+                sigma=params.initial_spread,
+                initial_solutions=rng.uniform(-1.0, 1.0, (params.batch_size, dimension)),
+                bounds=[(-1.0, 1.0)] * dimension,
+                batch_size=params.batch_size,
                 seed=self.seed * 1000 + index,
             )
-            for index in range(self.emitters)
+            for index in range(params.emitters)
         ]
-        result_archive = self.archive if archive is not self.archive else None
-        return Scheduler(archive, emitters, result_archive=result_archive)
+
+
+class QualityDiversityTester(SearchTester):
+    """CMA-ME / CMA-MAE emitters over an archive of failure descriptors."""
+
+    name = "qd"
+    params_model = QualityDiversityParams
+    params: QualityDiversityParams
+    sampler: QualityDiversitySampler | None
+
+    def make_sampler(self, context: SearchContext) -> QualityDiversitySampler:
+        self.check_horizon(context.horizon)
+        return QualityDiversitySampler(self.params, context)
 
     def check_horizon(self, horizon: int) -> None:
         """Refuse episodes of ``horizon`` decisions when the emitters and the archive over
-        their action sequences would not fit in :data:`MAX_STATE_BYTES` (a full covariance
+        their decision sequences would not fit in :data:`MAX_STATE_BYTES` (a full covariance
         grows with the square of the sequence's length). A run's configuration calls it before
         the run starts.
 
         Raises:
             TesterParameterError: Naming the setting to change.
         """
-        dimension = self.decision_size * horizon
-        archives = 2 if self.algorithm == "cma-mae" else 1
-        archive = archives * math.prod(self.bins) * (dimension + 8) * 8
-        if self.algorithm == "map-elites" or self.es != "cma_es":
+        params = self.params
+        dimension = params.space.largest_size * horizon
+        archives = 2 if params.algorithm == "cma-mae" else 1
+        archive = archives * math.prod(params.bins) * (dimension + 8) * 8
+        if params.algorithm == "map-elites" or params.es != "cma_es":
             per_emitter = 20 * dimension * 8  # a few vectors (lm_ma_es: a few dozen)
         else:
             per_emitter = 3 * dimension * dimension * 8  # covariance, eigenbasis, its inverse
-        needed = archive + self.emitters * per_emitter
+        needed = archive + params.emitters * per_emitter
         if needed > MAX_STATE_BYTES:
             raise TesterParameterError(
                 self.name,
                 "es" if per_emitter > archive else "bins",
                 f"episodes of {horizon:,} decisions make action sequences of "
-                f"{dimension:,} numbers, for which {self.emitters} emitter(s) with "
-                f"es={self.es!r} and {math.prod(self.bins):,} cells need "
+                f"{dimension:,} numbers, for which {params.emitters} emitter(s) with "
+                f"es={params.es!r} and {math.prod(params.bins):,} cells need "
                 f"{needed / 1024**3:.1f} GiB (at most {MAX_STATE_BYTES / 1024**3:.0f}): use "
                 "es='sep_cma_es', fewer cells, a longer decision period or shorter episodes",
             )
 
-    def _gaussian_emitters(self, archive: Any, dimension: int) -> list[Any]:
-        from ribs.emitters import GaussianEmitter
-
-        rng = np.random.default_rng(self.seed)
-        return [
-            GaussianEmitter(
-                archive,
-                sigma=self.sigma0,
-                initial_solutions=rng.uniform(-1.0, 1.0, (self.batch_size, dimension)),
-                bounds=[(-1.0, 1.0)] * dimension,
-                batch_size=self.batch_size,
-                seed=self.seed * 1000 + index,
-            )
-            for index in range(self.emitters)
-        ]
-
     def archive_table(self) -> pd.DataFrame:
-        """The archive: one row per filled cell, its measures, objective (the episode's maximum
-        risk) and the cell's index."""
-        if self.archive is None:
+        """The archive of the last search (:meth:`QualityDiversitySampler.archive_table`)."""
+        if self.sampler is None:
             raise RuntimeError("tester 'qd': explore() before reading the archive")
-        data = self.archive.data(["index", "objective", "measures"], return_type="pandas")
-        table: pd.DataFrame = data.rename(
-            columns={f"measures_{i}": name for i, name in enumerate(self.measures)}
-        )
-        return table
+        return self.sampler.archive_table()
 
     def save(self, directory: Path) -> None:
         """The archive (``archive.parquet``) and the settings (``qd.json``)."""
-        directory.mkdir(parents=True, exist_ok=True)
+        super().save(directory)
         self.archive_table().to_parquet(directory / "archive.parquet", index=False)
-        settings = {
-            "tester": self.name,
-            "seed": self.seed,
-            "algorithm": self.algorithm,
-            "measures": self.measures,
-            "bins": self.bins,
-            "emitters": self.emitters,
-            "batch_size": self.batch_size,
-            "sigma0": self.sigma0,
-            "learning_rate": self.learning_rate,
-            "es": self.es,
-            "clear_path": self.clear_path,
-            "space": self.space,
-            "probes": self.probes,
-        }
-        (directory / "qd.json").write_text(json.dumps(settings, indent=2) + "\n")

@@ -25,6 +25,7 @@ from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.cem import CrossEntropyTester
+from hazardhunt.testers.portfolio import PortfolioTester
 from hazardhunt.testers.qd import QualityDiversityTester
 from hazardhunt.testers.random_sampling import RandomTester
 
@@ -73,18 +74,49 @@ def register_tester(
 
 
 def make_tester(name: str, seed: int, params: Mapping[str, Any] | None = None) -> Tester:
-    """Build the registered tester ``name`` with keyword ``params``.
+    """Build the registered tester ``name`` with keyword ``params``; or, when ``params`` has a
+    ``method``, the registered tester ``method`` with the other parameters, a configuration of
+    it named ``name`` (:func:`tester_method`).
 
     Raises:
-        ValueError: ``name`` is not registered.
+        ValueError: ``name`` (or ``method``) is not registered.
         TesterParameterError: The tester does not take a parameter, or not its value.
     """
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown tester {name!r}: use one of {', '.join(_REGISTRY)}")
-    factory = _REGISTRY[name].factory
-    params = dict(params or {})
-    check_parameter_types(name, factory, params)
+    method, params = tester_method(name, params or {})
+    factory = _REGISTRY[method].factory
+    check_parameter_types(method, factory, params)
     return factory(seed=seed, **params)
+
+
+def tester_method(name: str, params: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The registered tester a tester named ``name`` with ``params`` is, and its parameters.
+
+    A configuration of a built-in tester is data, not code: ``[tester.cem-aim]`` with
+    ``method = "cem"`` and cem's parameters (``--tester cem-aim --tester-param method=cem``
+    on the command line) is cem with those parameters, named ``cem-aim`` in every table.
+
+    Raises:
+        ValueError: An unknown tester or method, or a configuration named like a built-in one.
+        TesterParameterError: ``method`` is not a string.
+    """
+    params = dict(params)
+    if "method" not in params:
+        if name not in _REGISTRY:
+            raise ValueError(
+                f"unknown tester {name!r}: use one of {', '.join(_REGISTRY)}, or configure one "
+                "of them under a name of your own with method = NAME"
+            )
+        return name, params
+    method = params.pop("method")
+    if not isinstance(method, str) or method not in _REGISTRY:
+        raise TesterParameterError(
+            name, "method", f"must be one of {', '.join(_REGISTRY)}, not {method!r}"
+        )
+    if name in _REGISTRY and name != method:
+        raise TesterParameterError(
+            name, "method", f"{name!r} is a built-in tester; name the configuration otherwise"
+        )
+    return method, params
 
 
 def check_parameter_types(name: str, factory: TesterFactory, params: Mapping[str, Any]) -> None:
@@ -239,4 +271,12 @@ register_tester(
     description="PPO learning from the episode's maximum risk plus a bonus for failures unlike "
     "those found before (Corso et al. 2019)",
     colour="#8c564b",
+)
+register_tester(
+    "portfolio",
+    PortfolioTester,
+    reward="max",
+    description="the default: uniform sampling, cem and qd as arms, the budget moving to the "
+    "arms that find new failure mechanisms",
+    colour="#d62728",
 )

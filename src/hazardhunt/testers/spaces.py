@@ -1,8 +1,8 @@
-"""The search spaces of the episode-level testers: what the numbers of one decision mean.
+"""Decision spaces: what the numbers of one decision mean, and how a whole episode of them plays.
 
 An episode-level searcher proposes a whole episode before it is played, as ``horizon``
-decisions of a few numbers in [-1, 1] each. How a decision becomes the human's action is the
-search space:
+decisions of a few numbers in [-1, 1] each. A :class:`DecisionSpace` says how a decision becomes
+the human's action:
 
 - ``open``: the decision is the action itself, (speed, turn rate), played open loop;
 - ``aim``: (speed, bearing around the robot, stand-off from its outline), aimed at the robot
@@ -10,92 +10,152 @@ search space:
 - ``route``: (speed, share of the robot's route, offset beside it), a walk to a point of the
   robot's route and a wait there (:func:`~hazardhunt.testers.aim.route_action`).
 
-Every space plays the actions it chooses, and the episode records those, so an episode
-replays exactly without knowing its space. ``clear_path`` makes any of them keep the human
-clear of walls and shelves (:func:`~hazardhunt.testers.clear_path.clear_action`), and makes
-the closed-loop ones walk round an obstacle between the human and its target
-(:mod:`hazardhunt.world.navigation`) instead of stopping at it.
+``detour`` makes any of them keep the human clear of walls and shelves
+(:func:`~hazardhunt.testers.clear_path.clear_action`), and makes the closed-loop ones walk round
+an obstacle between the human and its target (:mod:`hazardhunt.world.navigation`) instead of
+stopping at it.
+
+A :class:`SearchSpace` is what a searcher is configured with: one kind, or ``mixed`` (every
+kind in turn), the detour, and whether the search starts from the plain attacks
+(:meth:`DecisionSpace.plain_attacks`). In a campaign file: ``space = "aim"`` or
+``space = { kind = "aim", detour = true, plain_attacks = true }``.
+
+Every space plays the actions it chooses, and the episode records those, so an episode replays
+exactly without knowing its space.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, model_validator
 
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.aim import aimed_action, route_action
 from hazardhunt.testers.clear_path import clear_action, play_decisions
 
-ToAction = Callable[[Simulation, NDArray[np.floating[Any]], bool], NDArray[np.float32]]
-"""A closed-loop space's decision -> action, given whether to walk round obstacles."""
+DecisionKind = Literal["open", "aim", "route"]
+"""How one decision's numbers are read."""
 
-CLOSED_LOOP: dict[str, ToAction] = {"aim": aimed_action, "route": route_action}
-"""The spaces whose decisions are turned into actions while they are played."""
+DECISION_KINDS: tuple[DecisionKind, ...] = ("open", "aim", "route")
+"""The decision spaces' kinds, in the order ``mixed`` takes them."""
 
-DECISION_SIZES = {"open": 2, "aim": 3, "route": 3}
-"""Numbers per decision in each search space."""
+SPACE_KINDS = (*DECISION_KINDS, "mixed")
+"""The values of a searcher's space kind: one decision space, or all of them in turn."""
 
-SPACES = tuple(DECISION_SIZES)
-"""The search spaces' names."""
+_SIZES: dict[str, int] = {"open": 2, "aim": 3, "route": 3}
 
-SPACE_CHOICES = (*SPACES, "mixed")
-"""The values of a searcher's ``space``: one search space, or all of them in turn."""
+_STEERING: dict[str, Callable[[Simulation, NDArray[np.floating[Any]], bool], NDArray[Any]]] = {
+    "aim": aimed_action,
+    "route": route_action,
+}
 
+_MIRRORED_NUMBER = {"open": 1, "aim": 1, "route": 2}
+"""Per kind, the number of a decision whose sign mirrors it left for right: the turn rate, the
+bearing around the robot, the offset beside its route."""
 
-def searched_spaces(space: str) -> tuple[str, ...]:
-    """The search spaces a searcher's ``space`` (of :data:`SPACE_CHOICES`) takes in turn."""
-    return SPACES if space == "mixed" else (space,)
-
-
-BOUNDARY_VALUES: dict[str, tuple[tuple[float, ...], ...]] = {
+_BOUNDARY_VALUES: dict[str, tuple[tuple[float, ...], ...]] = {
     "open": ((-1.0, 0.0, 1.0),),
     # The bearing wraps round (-1 and 1 are both behind the robot): its quarter turns instead.
     "aim": ((-0.5, 0.0, 0.5, 1.0), (-1.0, 0.0, 1.0)),
     "route": ((-1.0, 0.0, 1.0), (-1.0, 0.0, 1.0)),
 }
-"""Per space, the boundary values of each number of a decision after the speed."""
+"""Per kind, the boundary values of each number of a decision after the speed."""
 
 
-def boundary_plans(space: str, horizon: int) -> NDArray[np.float64]:
-    """A space's boundary values as whole episodes (boundary-value analysis): the human keeps
-    one decision throughout, at its top speed, with every other number of the decision at one
-    of its :data:`BOUNDARY_VALUES` (-1, 0 or 1; a bearing at its quarter turns); shape (plans,
-    ``horizon``, numbers per decision).
+@dataclass(frozen=True)
+class DecisionSpace:
+    """One way of reading a decision's numbers as the human's action."""
 
-    In the closed-loop spaces these are the plain attacks a tester tries first: walk into the
-    robot from ahead, behind or either side, or keep 1.5 or 3 m from it there; wait on its
-    route, or 3 m to either side of it, at the start, the middle or the goal of its mission,
-    where a controller switches modes.
-    """
-    plans = np.array([(1.0, *values) for values in itertools.product(*BOUNDARY_VALUES[space])])
-    return np.repeat(plans[:, None, :], horizon, axis=1)
+    kind: DecisionKind = "open"
+    """``open``, ``aim`` or ``route`` (module docstring)."""
+    detour: bool = False
+    """Whether the human keeps clear of walls and shelves, and walks round them to a target."""
+
+    @property
+    def size(self) -> int:
+        """Numbers per decision."""
+        return _SIZES[self.kind]
+
+    def action(
+        self, simulation: Simulation, decision: NDArray[np.floating[Any]]
+    ) -> NDArray[np.float32]:
+        """The normalised (speed, turn rate) action ``decision`` stands for where the human and
+        the robot are in ``simulation`` now."""
+        steer = _STEERING.get(self.kind)
+        action = decision if steer is None else steer(simulation, decision, self.detour)
+        if self.detour:
+            return clear_action(simulation, action)
+        return np.asarray(action, np.float32)
+
+    def play(
+        self,
+        simulation: Simulation,
+        decisions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
+        keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
+    ) -> EpisodeResult:
+        """Play one episode from the scenario's start, each decision read in this space (an
+        episode still going when they run out is returned as it stands, outcome None)."""
+        if self.kind == "open" and not self.detour:
+            return simulation.simulate(decisions, keep_trajectory)
+        return play_decisions(simulation, decisions, self.action, keep_trajectory)
+
+    def mirrored(self, decisions: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+        """``decisions`` mirrored left for right: turning the other way, coming at the robot's
+        other side, standing on the other side of its route."""
+        mirrored = np.array(decisions, dtype=np.float64)
+        mirrored[..., _MIRRORED_NUMBER[self.kind]] *= -1.0
+        return mirrored
+
+    def plain_attacks(self, horizon: int) -> NDArray[np.float64]:
+        """The space's boundary values as whole episodes (boundary-value analysis): the human
+        keeps one decision throughout, at its top speed, with every other number of the
+        decision at -1, 0 or 1 (a bearing at its quarter turns); shape (plans, ``horizon``,
+        :attr:`size`).
+
+        In the closed-loop spaces these are the plain attacks a tester tries first: walk into
+        the robot from ahead, behind or either side, or keep 1.5 or 3 m from it there (12 in
+        ``aim``); wait on its route, or 3 m to either side of it, at the start, the middle or
+        the goal of its mission, where a controller switches modes (9 in ``route``).
+        """
+        values = itertools.product(*_BOUNDARY_VALUES[self.kind])
+        plans = np.array([(1.0, *numbers) for numbers in values])
+        return np.repeat(plans[:, None, :], horizon, axis=1)
 
 
-def play_in_space(
-    simulation: Simulation,
-    decisions: Sequence[NDArray[np.floating[Any]]] | NDArray[np.floating[Any]],
-    space: str,
-    keep_trajectory: bool | Callable[[EpisodeSummary], bool] = True,
-    clear_path: bool = False,
-) -> EpisodeResult:
-    """Play one episode from the scenario's start, each decision read in ``space``.
+class SearchSpace(BaseModel):
+    """Where a searcher searches: its decision space(s), the detour, and the plain attacks."""
 
-    Raises:
-        ValueError: An unknown space.
-    """
-    if space not in DECISION_SIZES:
-        raise ValueError(f"unknown search space {space!r}: one of {', '.join(SPACES)}")
-    if space == "open" and not clear_path:
-        return simulation.simulate(decisions, keep_trajectory)
-    steer = CLOSED_LOOP.get(space)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
-    def to_action(simulation: Simulation, decision: NDArray[np.floating[Any]]) -> NDArray[Any]:
-        action = decision if steer is None else steer(simulation, decision, clear_path)
-        return clear_action(simulation, action) if clear_path else np.asarray(action, np.float32)
+    kind: Literal["open", "aim", "route", "mixed"] = "open"
+    """One decision space's kind, or ``mixed``: every kind in turn (``open``, ``aim``,
+    ``route``), the failures found in one counting as known in the others."""
+    detour: bool = False
+    """Whether the human keeps clear of walls and shelves, and walks round them to a target."""
+    plain_attacks: bool = False
+    """Whether the search starts with each decision space's plain attacks
+    (:meth:`DecisionSpace.plain_attacks`: 3, 12 and 9 episodes)."""
 
-    return play_decisions(simulation, decisions, to_action, keep_trajectory)
+    @model_validator(mode="before")
+    @classmethod
+    def _from_kind(cls, data: Any) -> Any:
+        """A bare kind (``space = "aim"``) is that kind with the other settings' defaults."""
+        return {"kind": data} if isinstance(data, str) else data
+
+    @property
+    def decision_spaces(self) -> tuple[DecisionSpace, ...]:
+        """The decision spaces searched, in the order they take turns."""
+        kinds = DECISION_KINDS if self.kind == "mixed" else (self.kind,)
+        return tuple(DecisionSpace(kind, self.detour) for kind in kinds)
+
+    @property
+    def largest_size(self) -> int:
+        """The most numbers per decision of the spaces searched."""
+        return max(space.size for space in self.decision_spaces)

@@ -1,0 +1,458 @@
+"""The default tester: a portfolio of samplers that moves its budget to what finds new failures.
+
+Which search finds the most distinct failures differs from one system under test to the next:
+a human aimed at the robot finds the failures that need someone who comes for it, the plain
+attacks and the walks to the robot's route find the bugs in a controller's logic, uniform
+sampling the failures that are everywhere. A safety engineer does not know beforehand which
+kind their system has. The portfolio runs them all as arms and, as it runs, gives more of the
+budget to the arms that keep finding something new (as Nevergrad's NGOpt or Optuna's automatic
+sampler choose an optimiser, but judged on distinct failure mechanisms rather than on a best
+score). Its default arms (:data:`DEFAULT_ARMS`):
+
+- ``mirror``: for a failure any arm found, the same episode mirrored left for right, while the
+  robot's other side has no failure of its kind: one episode per side checked;
+- ``cem-mixed``: the cross-entropy method over every decision space in turn, walking round
+  obstacles, starting from the plain attacks;
+- ``cem-aim``: the cross-entropy method aimed at the robot, walking round obstacles;
+- ``qd-mixed``: quality-diversity search over every decision space, one emitter each;
+- ``random``: uniform random sampling of open-loop actions that keep off walls and shelves.
+
+How the budget moves:
+
+- an episode's gain is 1 for a failure of a class no arm has found before (the built-in
+  taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`), 0.3 for one in a
+  new cell of the failure descriptors (sector of the robot, safety-layer history, human moving
+  or standing), and 0.1 for any other failure;
+- each arm's value is its gain per episode, discounted so that what it found lately counts
+  most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
+  next batch goes to the arm of highest value;
+- every arm keeps at least ``floor`` / (number of arms) of the episodes played, so that a
+  search that finds its first failure late (behind a protective field) gets to find it.
+
+The failures found count as known for every arm: the cross-entropy arms score a failure by its
+distance from all failures the portfolio has, so each arm is pushed away from what the others
+found. An arm that raises is dropped, with a warning in the run's record, and the others share
+its budget. The run records which arm played each episode (``tester/arms.csv``), what each arm
+found (``tester/portfolio.json``) and the quality-diversity arm's archive
+(``tester/archive.parquet``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from hazardhunt.sim.simulation import EpisodeResult
+from hazardhunt.spec.descriptors import EMERGENCY_STOP_CODES
+from hazardhunt.spec.episode import EpisodeSummary
+from hazardhunt.spec.failure_classes import MechanismClassifier
+from hazardhunt.sut.plugins import PluginError, build
+from hazardhunt.testers.base import Tester, TesterParameterError
+from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.novelty import FailureArchive
+from hazardhunt.testers.qd import QualityDiversityParams, QualityDiversitySampler
+from hazardhunt.testers.search import (
+    Sampler,
+    SearchContext,
+    SearchParams,
+    SearchTester,
+    SpaceParams,
+    parse_params,
+)
+
+NEW_CLASS_GAIN = 1.0
+"""An episode's gain for a failure of a class no arm has found."""
+NEW_CELL_GAIN = 0.3
+"""An episode's gain for a failure in a descriptor cell no arm has filled."""
+FAILURE_GAIN = 0.1
+"""An episode's gain for any other failure."""
+BEARING_CELLS = 8
+"""Sectors around the robot in a descriptor cell."""
+
+
+class UniformParams(SpaceParams):
+    """Uniform random sampling's settings."""
+
+    batch_size: int = Field(default=10, ge=1, le=10_000)
+    """Episodes per batch."""
+
+
+class UniformSampler:
+    """Every number of every decision uniform in [-1, 1], the decision spaces in turn."""
+
+    def __init__(self, params: UniformParams, context: SearchContext) -> None:
+        self.params = params
+        self.rng = np.random.default_rng(context.seed)
+        self.horizon = context.horizon
+        self.batches = 0
+
+    def ask(self) -> list[Plan]:
+        spaces = self.params.space.decision_spaces
+        space = spaces[self.batches % len(spaces)]
+        shape = (self.params.batch_size, self.horizon, space.size)
+        return [Plan(space, decisions) for decisions in self.rng.uniform(-1.0, 1.0, shape)]
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        self.batches += 1
+
+    def record(self) -> dict[str, Any]:
+        return {}
+
+
+def failure_cell(summary: EpisodeSummary, moving_speed: float) -> tuple[int, int, int]:
+    """The descriptor cell of a failure: the sector of the robot it met the human in (of
+    :data:`BEARING_CELLS`), the safety layer's history, and whether the human was moving."""
+    sector = math.floor((summary.closest_bearing + math.pi) / math.tau * BEARING_CELLS)
+    return (
+        sector % BEARING_CELLS,
+        int(EMERGENCY_STOP_CODES[summary.closest_emergency_stop]),
+        int(summary.closest_human_speed > moving_speed),
+    )
+
+
+def mirrored_cell(cell: tuple[int, int, int]) -> tuple[int, int, int]:
+    """The cell on the robot's other side (the bearing's sign flipped)."""
+    sector, stop, moving = cell
+    return (BEARING_CELLS - 1 - sector, stop, moving)
+
+
+class MirrorParams(SearchParams):
+    """The mirror's settings."""
+
+    attempts: int = Field(default=2, ge=1, le=100)
+    """Failures per descriptor cell whose mirror image is played."""
+
+
+class MirrorSampler:
+    """Plays, for a failure any arm found, the same episode mirrored left for right
+    (:meth:`~hazardhunt.testers.spaces.DecisionSpace.mirrored`) while no failure has been seen
+    in the cell on the robot's other side: a robot that fails for a human on its left is
+    checked on its right at the cost of one episode. It proposes nothing until some arm finds
+    a failure."""
+
+    def __init__(self, params: MirrorParams, context: SearchContext) -> None:
+        self.params = params
+        self.filled: set[tuple[int, int, int]] = set()
+        self.attempts: dict[tuple[int, int, int], int] = {}
+        self.queue: list[tuple[tuple[int, int, int], Plan]] = []
+
+    def observe(self, plans: list[Plan], results: list[EpisodeResult], moving: float) -> None:
+        """Hear what any arm played (the mirror's own episodes included)."""
+        for plan, result in zip(plans, results, strict=False):
+            if result.summary.outcome != "failure":
+                continue
+            cell = failure_cell(result.summary, moving)
+            self.filled.add(cell)
+            target = mirrored_cell(cell)
+            if target in self.filled or self.attempts.get(target, 0) >= self.params.attempts:
+                continue
+            self.attempts[target] = self.attempts.get(target, 0) + 1
+            mirrored = plan.space.mirrored(plan.decisions)
+            self.queue.append((target, Plan(plan.space, mirrored)))
+
+    def ask(self) -> list[Plan]:
+        waiting = [(cell, plan) for cell, plan in self.queue if cell not in self.filled]
+        self.queue = []
+        return [plan for _, plan in waiting]
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        pass
+
+    def record(self) -> dict[str, Any]:
+        return {"cells_seen": len(self.filled)}
+
+
+METHODS: dict[str, type[SearchParams]] = {
+    "mirror": MirrorParams,
+    "uniform": UniformParams,
+    "cem": CrossEntropyParams,
+    "qd": QualityDiversityParams,
+}
+"""The samplers an arm may use, by name, with their settings."""
+
+
+class Arm(BaseModel):
+    """One sampler of the portfolio and its settings."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+    name: str = Field(min_length=1)
+    """How the run's record names the arm."""
+    method: str
+    """``cem``, ``qd``, ``uniform``, ``mirror``, or a sampler of one's own: the import path
+    (``package.module:Class``) of a :class:`~hazardhunt.testers.search.SearchTester`, called
+    as ``Class(seed=..., **params)``, whose ``make_sampler`` makes the arm's sampler."""
+    params: dict[str, Any] = {}
+    """The sampler's settings (those of ``hazardhunt run --tester METHOD``, but ``workers``,
+    which the portfolio sets)."""
+
+    @field_validator("method")
+    @classmethod
+    def _known(cls, method: str) -> str:
+        if method not in METHODS and ":" not in method:
+            raise ValueError(
+                f"must be one of {', '.join(METHODS)} or the import path of your own "
+                "(package.module:Class)"
+            )
+        return method
+
+
+DEFAULT_ARMS = (
+    Arm(name="mirror", method="mirror"),
+    Arm(
+        name="cem-mixed",
+        method="cem",
+        params={"space": {"kind": "mixed", "detour": True, "plain_attacks": True}},
+    ),
+    Arm(name="cem-aim", method="cem", params={"space": {"kind": "aim", "detour": True}}),
+    Arm(
+        name="qd-mixed",
+        method="qd",
+        params={"emitters": 3, "space": {"kind": "mixed", "detour": True, "plain_attacks": True}},
+    ),
+    Arm(name="random", method="uniform", params={"space": {"kind": "open", "detour": True}}),
+)
+"""The arms of the default portfolio: the configurations that were each the best on some kind
+of system under test (docs/search-methods.md)."""
+
+
+class PortfolioParams(SearchParams):
+    """The portfolio's settings."""
+
+    arms: tuple[Arm, ...] = Field(default=DEFAULT_ARMS, min_length=1)
+    """The samplers the budget is shared between."""
+    floor: float = Field(default=0.3, ge=0.0, le=1.0, allow_inf_nan=False)
+    """The share of the episodes spread evenly over the arms whatever they find."""
+    discount: float = Field(default=0.9, gt=0.0, le=1.0, allow_inf_nan=False)
+    """Weight of an arm's earlier batches against its latest, per batch the portfolio plays."""
+    optimism: float = Field(default=0.02, ge=0.0, allow_inf_nan=False)
+    """Scale of the bonus for arms tried less (in gain per episode)."""
+
+    @field_validator("arms", mode="before")
+    @classmethod
+    def _arm_tables(cls, arms: Any) -> Any:
+        return tuple(arms) if isinstance(arms, list) else arms
+
+    @field_validator("arms")
+    @classmethod
+    def _distinct(cls, arms: tuple[Arm, ...]) -> tuple[Arm, ...]:
+        names = [arm.name for arm in arms]
+        if len(set(names)) != len(names):
+            raise ValueError(f"arm names must differ: {', '.join(names)}")
+        for arm in arms:
+            if "workers" in arm.params:
+                raise ValueError(f"arm {arm.name!r}: workers is the portfolio's setting")
+            try:
+                if arm.method in METHODS:
+                    parse_params(arm.name, METHODS[arm.method], arm.params)
+                else:
+                    own_tester(arm, seed=0)
+            except TesterParameterError as error:
+                raise ValueError(f"arm {arm.name!r}: {error.key}: {error.problem}") from None
+            except PluginError as error:
+                raise ValueError(f"arm {arm.name!r}: {error}") from None
+        return arms
+
+
+@dataclass
+class _ArmState:
+    """One arm as the portfolio runs it."""
+
+    arm: Arm
+    sampler: Sampler
+    episodes: int = 0
+    failures: int = 0
+    classes: dict[str, int] = field(default_factory=dict)
+    """The classes this arm found first, with the episode it found each in."""
+    weighted_gain: float = 0.0
+    weighted_episodes: float = 0.0
+    dropped: str | None = None
+    """Why the arm was taken out of the portfolio (it raised), if it was."""
+
+    def value(self, total: float, optimism: float) -> float:
+        if self.weighted_episodes <= 0.0:
+            return math.inf
+        mean = self.weighted_gain / self.weighted_episodes
+        return mean + optimism * math.sqrt(max(math.log(total), 0.0) / self.weighted_episodes)
+
+
+class PortfolioSampler:
+    """Asks the arm of highest value for its next batch; credits it with what it found."""
+
+    def __init__(self, params: PortfolioParams, context: SearchContext) -> None:
+        self.params = params
+        known = FailureArchive(neighbours=1)
+        self.arms = [
+            _ArmState(arm, _sampler(arm, _arm_context(context, arm), known)) for arm in params.arms
+        ]
+        self.classifier = MechanismClassifier(robot=context.simulation.robot_params)
+        self.field = context.simulation.field
+        self.classes_found: set[str] = set()
+        self.cells_found: set[tuple[int, ...]] = set()
+        self.episode_arms: list[str] = []
+        self._asking: _ArmState | None = None
+
+    def ask(self) -> list[Plan]:
+        idle: set[str] = set()  # arms with nothing to propose now (the mirror, the attacks)
+        while True:
+            state = self._asking = self._choose(idle)
+            try:
+                plans = state.sampler.ask()
+            except Exception as error:  # a user's sampler may raise anything
+                self._drop(state, error)
+                continue
+            if plans:
+                return plans
+            idle.add(state.arm.name)
+
+    def _choose(self, idle: set[str]) -> _ArmState:
+        active = [state for state in self.arms if state.dropped is None]
+        if not active:
+            problems = "; ".join(f"{state.arm.name}: {state.dropped}" for state in self.arms)
+            raise RuntimeError(f"tester 'portfolio': every arm failed ({problems})")
+        active = [state for state in active if state.arm.name not in idle]
+        if not active:
+            raise RuntimeError("tester 'portfolio': no arm has an episode to propose")
+        played = sum(state.episodes for state in active)
+        least = min(active, key=lambda state: state.episodes)
+        if least.episodes == 0 or least.episodes < self.params.floor * played / len(active):
+            return least
+        total = sum(state.weighted_episodes for state in active)
+        return max(active, key=lambda state: state.value(total, self.params.optimism))
+
+    def _drop(self, state: _ArmState, error: Exception) -> None:
+        """Take an arm that raised out of the portfolio; the others share its budget."""
+        state.dropped = f"{type(error).__name__}: {error}"
+        warnings.warn(
+            f"portfolio arm {state.arm.name!r} raised and was dropped: {state.dropped}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        state = self._asking
+        assert state is not None, "tell() before ask()"
+        first = len(self.episode_arms)
+        gain = sum(self._gain(state, result, first + i) for i, result in enumerate(results))
+        for other in self.arms:
+            other.weighted_gain *= self.params.discount
+            other.weighted_episodes *= self.params.discount
+        state.weighted_gain += gain
+        state.weighted_episodes += len(results)
+        state.episodes += len(results)
+        self.episode_arms += [state.arm.name] * len(results)
+        self._asking = None
+        try:
+            state.sampler.tell(plans, results)
+        except Exception as error:  # a user's sampler may raise anything
+            self._drop(state, error)
+        for other in self.arms:
+            if isinstance(other.sampler, MirrorSampler):
+                other.sampler.observe(plans, results, self.classifier.moving_speed)
+
+    def _gain(self, state: _ArmState, result: EpisodeResult, episode: int) -> float:
+        """What ``episode``, played by ``state``'s arm, found that no arm had."""
+        summary = result.summary
+        if summary.outcome != "failure":
+            return 0.0
+        state.failures += 1
+        gain = FAILURE_GAIN
+        failure_class = self.classifier.classify(result.trajectory or (), summary, self.field)
+        if failure_class not in self.classes_found:
+            self.classes_found.add(failure_class)
+            state.classes[failure_class] = episode
+            gain = NEW_CLASS_GAIN
+        cell = failure_cell(summary, self.classifier.moving_speed)
+        if cell not in self.cells_found:
+            self.cells_found.add(cell)
+            gain = max(gain, NEW_CELL_GAIN)
+        return gain
+
+    def record(self) -> dict[str, Any]:
+        return {
+            "arms_played": {
+                state.arm.name: {
+                    "episodes": state.episodes,
+                    "failures": state.failures,
+                    "classes_first_found": state.classes,
+                    "dropped": state.dropped,
+                    **state.sampler.record(),
+                }
+                for state in self.arms
+            }
+        }
+
+
+def _arm_context(context: SearchContext, arm: Arm) -> SearchContext:
+    """The run's context with the arm's own seed, drawn from the run's seed and the arm's name
+    (so that adding an arm leaves the others' episodes as they were)."""
+    entropy = [context.seed, zlib.crc32(arm.name.encode())]
+    seed = int(np.random.SeedSequence(entropy).generate_state(1)[0])
+    return SearchContext(context.simulation, seed)
+
+
+def own_tester(arm: Arm, seed: int) -> SearchTester:
+    """The search tester of an arm whose method is an import path, built with its parameters;
+    its module is found on the Python path or in the working directory.
+
+    Raises:
+        PluginError: It does not load, does not take the parameters, or makes no sampler.
+    """
+    tester = build("portfolio arm", arm.method, {"seed": seed, **arm.params}, Tester, [os.getcwd()])
+    if not callable(getattr(tester, "make_sampler", None)):
+        raise PluginError(
+            f"{arm.method!r} has no make_sampler(context): an arm is a SearchTester "
+            "(hazardhunt.testers.search)"
+        )
+    return cast(SearchTester, tester)
+
+
+def _sampler(arm: Arm, context: SearchContext, known: FailureArchive) -> Sampler:
+    if arm.method not in METHODS:
+        return own_tester(arm, context.seed).make_sampler(context)
+    params = parse_params(arm.name, METHODS[arm.method], arm.params)
+    if isinstance(params, CrossEntropyParams):
+        return CrossEntropySampler(params, context, known)
+    if isinstance(params, QualityDiversityParams):
+        return QualityDiversitySampler(params, context)
+    if isinstance(params, MirrorParams):
+        return MirrorSampler(params, context)
+    assert isinstance(params, UniformParams)
+    return UniformSampler(params, context)
+
+
+class PortfolioTester(SearchTester):
+    """The default tester: uniform sampling, the cross-entropy method and quality-diversity
+    search as arms, the budget going to the arms that find new failure mechanisms."""
+
+    name = "portfolio"
+    params_model = PortfolioParams
+    params: PortfolioParams
+    sampler: PortfolioSampler | None
+
+    def make_sampler(self, context: SearchContext) -> PortfolioSampler:
+        return PortfolioSampler(self.params, context)
+
+    def save(self, directory: Path) -> None:
+        """The settings and what each arm found (``portfolio.json``), which arm played each
+        episode (``arms.csv``), and the archive of the first quality-diversity arm
+        (``archive.parquet``, which the report draws)."""
+        super().save(directory)
+        if self.sampler is None:
+            return
+        arms = self.sampler.episode_arms
+        lines = ["episode,arm", *(f"{episode},{arm}" for episode, arm in enumerate(arms))]
+        (directory / "arms.csv").write_text("\n".join(lines) + "\n")
+        for state in self.sampler.arms:
+            if isinstance(state.sampler, QualityDiversitySampler) and state.episodes:
+                state.sampler.archive_table().to_parquet(directory / "archive.parquet", index=False)
+                break

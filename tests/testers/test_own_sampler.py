@@ -1,0 +1,78 @@
+"""The sampler of one's own that docs/plugins.md shows runs as written."""
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from hazardhunt.campaign.config import ConfigError, PluginSpec, RunConfig
+from hazardhunt.campaign.plugins import make_plugin_tester
+from hazardhunt.campaign.run import record_run
+from hazardhunt.testers import make_tester
+
+DOCS = Path(__file__).parents[2] / "docs" / "plugins.md"
+
+
+def documented_sampler() -> str:
+    blocks = re.findall(r"```python\n(.*?)```", DOCS.read_text(), flags=re.S)
+    return next(block for block in blocks if "class GridSampler" in block)
+
+
+def test_the_documented_sampler_runs_and_records_its_settings(tmp_path):
+    (tmp_path / "my_testers.py").write_text(documented_sampler())
+    spec = PluginSpec(
+        path="my_testers:GridSearch",
+        params={"speeds": 3, "space": "aim"},
+        search_path=[str(tmp_path)],
+    )
+    config = RunConfig(
+        scenario="crossing",
+        field="none",
+        tester="grid",
+        tester_plugin=spec,
+        seed=0,
+        episodes=4,
+        controller=PluginSpec(path="hazardhunt.sut.pursuit:PursuitController"),
+    )
+    assert record_run(config, tmp_path / "run")["episodes"] == 4
+    settings = json.loads((tmp_path / "run" / "tester" / "grid.json").read_text())
+    assert settings["speeds"] == 3
+    assert settings["space"]["kind"] == "aim"
+
+
+def test_a_wrong_setting_of_the_documented_sampler_names_it(tmp_path):
+    (tmp_path / "my_testers.py").write_text(documented_sampler())
+    spec = PluginSpec(
+        path="my_testers:GridSearch", params={"speeds": 1}, search_path=[str(tmp_path)]
+    )
+    with pytest.raises((ConfigError, ValueError), match="speeds: must be greater than or equal"):
+        make_plugin_tester(spec, seed=0)
+
+
+def test_the_documented_sampler_joins_the_portfolio_as_an_arm(tmp_path, monkeypatch):
+    (tmp_path / "my_testers.py").write_text(documented_sampler())
+    monkeypatch.chdir(tmp_path)  # the arm's module is found in the working directory
+    arms = [
+        {"name": "grid", "method": "my_testers:GridSearch", "params": {"speeds": 3}},
+        {"name": "uniform", "method": "uniform", "params": {"batch_size": 2}},
+    ]
+    config = RunConfig(
+        scenario="crossing",
+        field="none",
+        tester="portfolio",
+        tester_params={"arms": arms},
+        seed=0,
+        episodes=6,
+        controller=PluginSpec(path="hazardhunt.sut.pursuit:PursuitController"),
+    )
+    assert record_run(config, tmp_path / "run")["episodes"] == 6
+    record = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())
+    assert record["arms_played"]["grid"]["episodes"] > 0
+
+
+def test_an_arm_of_ones_own_that_does_not_load_is_a_clear_error(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    arms = [{"name": "mine", "method": "no_such_module:Search"}]
+    with pytest.raises(ValueError, match="arm 'mine': 'no_such_module:Search': cannot import"):
+        make_tester("portfolio", 0, {"arms": arms})

@@ -1,0 +1,112 @@
+"""The default tester: a portfolio of samplers sharing the budget by what each finds."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.run import record_run
+from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sut.pursuit import PursuitController
+from hazardhunt.testers.cem import CrossEntropySampler
+from hazardhunt.testers.portfolio import DEFAULT_ARMS
+from hazardhunt.testers.spaces import DecisionSpace
+
+
+def portfolio_run(directory, episodes, params=None, scenario="crossing"):
+    config = RunConfig(
+        scenario=scenario,
+        field="none",
+        tester="portfolio",
+        tester_params=params or {},
+        seed=0,
+        episodes=episodes,
+    )
+    return record_run(config, directory)
+
+
+def test_the_default_portfolio_says_which_arm_found_each_class_first(tmp_path):
+    summary = portfolio_run(tmp_path / "run", 90)
+    assert summary["episodes"] == 90
+    record = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())
+    arms = record["arms_played"]
+    assert list(arms) == [arm.name for arm in DEFAULT_ARMS]
+    # Every arm gets its share, and the episodes add up to the budget.
+    assert all(arm["episodes"] > 0 for arm in arms.values())
+    assert sum(arm["episodes"] for arm in arms.values()) == 90
+    # Each class the run found was found first by exactly one arm, in an episode that is a
+    # failure of that class in the run's own table.
+    first = {
+        cls: (name, episode)
+        for name, arm in arms.items()
+        for cls, episode in arm["classes_first_found"].items()
+    }
+    assert set(first) == set(summary["classes"])
+    assert len(first) >= 2
+    played_by = pd.read_csv(tmp_path / "run" / "tester" / "arms.csv")
+    assert list(played_by["episode"]) == list(range(90))
+    failures = pd.read_parquet(tmp_path / "run" / "failures.parquet").set_index("episode")
+    for failure_class, (arm, episode) in first.items():
+        assert played_by["arm"][episode] == arm
+        assert failures.loc[episode, "class"] == failure_class
+
+
+def test_an_arm_that_raises_is_dropped_and_the_others_spend_the_budget(tmp_path, monkeypatch):
+    def broken(self, plans, results):
+        raise ZeroDivisionError("the arm's own bug")
+
+    monkeypatch.setattr(CrossEntropySampler, "tell", broken)  # both cem arms fail
+    with pytest.warns(RuntimeWarning) as warned:
+        summary = portfolio_run(tmp_path / "run", 80)
+    assert sorted(str(warning.message).split(":")[0] for warning in warned) == [
+        "portfolio arm 'cem-aim' raised and was dropped",
+        "portfolio arm 'cem-mixed' raised and was dropped",
+    ]
+    assert summary["episodes"] == 80
+    arms = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())["arms_played"]
+    assert arms["cem-aim"]["dropped"] == "ZeroDivisionError: the arm's own bug"
+    assert arms["cem-aim"]["episodes"] == 20  # its one batch
+    assert arms["random"]["dropped"] is None
+    others = ("mirror", "qd-mixed", "random")
+    assert sum(arms[name]["episodes"] for name in others) == 80 - 40
+
+
+def test_a_portfolio_whose_every_arm_raises_fails_the_run(tmp_path, monkeypatch):
+    def broken(self):
+        raise ZeroDivisionError("the arm's own bug")
+
+    monkeypatch.setattr(CrossEntropySampler, "ask", broken)
+    params = {"arms": [{"name": "only", "method": "cem"}]}
+    with (
+        pytest.warns(RuntimeWarning),
+        pytest.raises(RuntimeError, match=r"every arm failed \(only: ZeroDivisionError"),
+    ):
+        portfolio_run(tmp_path / "run", 10, params)
+
+
+def test_a_mirrored_decision_comes_at_the_robot_from_its_other_side():
+    aims = np.tile([1.0, 0.5, -1.0], (15, 1))  # into the robot's left side
+    mirrored = DecisionSpace("aim").mirrored(aims)
+    assert (mirrored[:, 1] == -0.5).all()  # its right side
+    assert (mirrored[:, [0, 2]] == aims[:, [0, 2]]).all()
+    route = np.tile([1.0, 1.0, 0.5], (15, 1))
+    assert (DecisionSpace("route").mirrored(route)[:, 2] == -0.5).all()
+    sim = Simulation.build("head-on", "none", controller=PursuitController())
+    left = DecisionSpace("aim").play(sim, aims, False).summary
+    right = DecisionSpace("aim").play(sim, mirrored, False).summary
+    assert (left.contact_face, right.contact_face) == ("left", "right")
+
+
+def test_the_mirror_arm_plays_the_other_side_of_failures_the_others_found(tmp_path):
+    params = {
+        "arms": [
+            {"name": "mirror", "method": "mirror"},
+            {"name": "aimed", "method": "cem", "params": {"space": "aim", "batch_size": 6}},
+        ]
+    }
+    portfolio_run(tmp_path / "run", 60, params, scenario="head-on")
+    arms = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())["arms_played"]
+    assert arms["aimed"]["failures"] > 0
+    assert 0 < arms["mirror"]["episodes"] <= 2 * arms["mirror"]["cells_seen"]
