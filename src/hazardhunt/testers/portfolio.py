@@ -9,16 +9,18 @@ budget to the arms that keep finding something new (as Nevergrad's NGOpt or Optu
 sampler choose an optimiser, but judged on distinct failure mechanisms rather than on a best
 score). Its default arms (:data:`DEFAULT_ARMS`):
 
-- ``mirror``: for a failure any arm found, the same episode mirrored left for right, while the
-  robot's other side has no failure of its kind: one episode per side checked;
 - ``cem-mixed``: the cross-entropy method over every decision space in turn, walking round
   obstacles, starting from the plain attacks;
 - ``cem-aim``: the cross-entropy method aimed at the robot, walking round obstacles;
 - ``qd-mixed``: quality-diversity search over every decision space, one emitter each;
-- ``random``: uniform random sampling of open-loop actions that keep off walls and shelves.
+- ``random``: uniform random sampling of open-loop actions that keep off walls and shelves;
+- ``mirror``: for a failure any arm found, the same episode mirrored left for right, while the
+  robot's other side has no failure of its kind: one episode per side checked.
 
 How the budget moves:
 
+- first every arm takes its first look, back to back in the arms' order: one batch per decision
+  space it searches in turn (the plain attacks of ``cem-mixed`` among them);
 - an episode's gain is 1 for a failure of a class no arm has found before (the built-in
   taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`), 0.3 for one in a
   new cell of the failure descriptors (sector of the robot, safety-layer history, human moving
@@ -27,7 +29,8 @@ How the budget moves:
   most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
   next batch goes to the arm of highest value;
 - every arm keeps at least ``floor`` / (number of arms) of the episodes played, so that a
-  search that finds its first failure late (behind a protective field) gets to find it.
+  search that finds its first failure late (behind a protective field) gets to find it; the
+  mirror, which has something to propose only after a failure, is asked first when it has.
 
 The failures found count as known for every arm: the cross-entropy arms score a failure by its
 distance from all failures the portfolio has, so each arm is pushed away from what the others
@@ -68,6 +71,7 @@ from hazardhunt.testers.search import (
     SpaceParams,
     parse_params,
 )
+from hazardhunt.testers.spaces import SearchSpace
 
 NEW_CLASS_GAIN = 1.0
 """An episode's gain for a failure of a class no arm has found."""
@@ -207,7 +211,6 @@ class Arm(BaseModel):
 
 
 DEFAULT_ARMS = (
-    Arm(name="mirror", method="mirror"),
     Arm(
         name="cem-mixed",
         method="cem",
@@ -217,9 +220,10 @@ DEFAULT_ARMS = (
     Arm(
         name="qd-mixed",
         method="qd",
-        params={"emitters": 3, "space": {"kind": "mixed", "detour": True, "plain_attacks": True}},
+        params={"emitters": 3, "space": {"kind": "mixed", "detour": True}},
     ),
     Arm(name="random", method="uniform", params={"space": {"kind": "open", "detour": True}}),
+    Arm(name="mirror", method="mirror"),
 )
 """The arms of the default portfolio: the configurations that were each the best on some kind
 of system under test (docs/search-methods.md)."""
@@ -277,6 +281,10 @@ class _ArmState:
     weighted_episodes: float = 0.0
     dropped: str | None = None
     """Why the arm was taken out of the portfolio (it raised), if it was."""
+    batches: int = 0
+    first_look: int = 1
+    """Batches the arm plays back to back before the budget moves by what it finds: one per
+    decision space it searches, so that it has tried each (its plain attacks, say)."""
 
     def value(self, total: float, optimism: float) -> float:
         if self.weighted_episodes <= 0.0:
@@ -292,7 +300,8 @@ class PortfolioSampler:
         self.params = params
         known = FailureArchive(neighbours=1)
         self.arms = [
-            _ArmState(arm, _sampler(arm, _arm_context(context, arm), known)) for arm in params.arms
+            _ArmState(arm, _sampler(arm, _arm_context(context, arm), known), first_look=_looks(arm))
+            for arm in params.arms
         ]
         self.classifier = MechanismClassifier(robot=context.simulation.robot_params)
         self.field = context.simulation.field
@@ -322,6 +331,9 @@ class PortfolioSampler:
         active = [state for state in active if state.arm.name not in idle]
         if not active:
             raise RuntimeError("tester 'portfolio': no arm has an episode to propose")
+        for state in active:  # in the arms' order
+            if state.batches < state.first_look:
+                return state
         played = sum(state.episodes for state in active)
         least = min(active, key=lambda state: state.episodes)
         if least.episodes == 0 or least.episodes < self.params.floor * played / len(active):
@@ -349,6 +361,7 @@ class PortfolioSampler:
         state.weighted_gain += gain
         state.weighted_episodes += len(results)
         state.episodes += len(results)
+        state.batches += 1
         self.episode_arms += [state.arm.name] * len(results)
         self._asking = None
         try:
@@ -390,6 +403,22 @@ class PortfolioSampler:
                 for state in self.arms
             }
         }
+
+
+def _looks(arm: Arm) -> int:
+    """The batches of an arm's first look: one per decision space it searches in turn (one for
+    quality-diversity, whose every batch spans them, after its plain attacks; none for the
+    mirror, which waits for failures)."""
+    if arm.method not in METHODS:
+        return 1
+    params = parse_params(arm.name, METHODS[arm.method], arm.params)
+    if isinstance(params, MirrorParams):
+        return 0
+    if isinstance(params, QualityDiversityParams):  # each batch spans every space
+        attacks = params.space.plain_attacks
+        return 1 + (len(params.space.decision_spaces) if attacks else 0)
+    space = getattr(params, "space", None)
+    return len(space.decision_spaces) if isinstance(space, SearchSpace) else 1
 
 
 def _arm_context(context: SearchContext, arm: Arm) -> SearchContext:
