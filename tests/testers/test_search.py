@@ -84,6 +84,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("qd", {"clear_path": "yes"}, "space.detour: must be a valid boolean, not 'yes'"),
         ("cem", {"space": "sideways"}, "space.kind: must be 'open', 'aim', 'route' or 'mixed'"),
         ("cem", {"space": {"kind": "aim", "detours": True}}, "space.detours: unknown setting"),
+        ("cem", {"space": 3, "clear_path": True}, "space: must be a valid dictionary"),
         ("cem", {"noise_exponent": -1}, "noise_exponent: must be greater than or equal to 0"),
         ("cem", {"n_workers": 65}, "workers: must be less than or equal to 64, not 65"),
         ("qd", {"aim": True}, "aim: unknown parameter"),

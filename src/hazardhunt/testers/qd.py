@@ -36,9 +36,6 @@ MAX_EMITTERS = 100
 """The most emitters (each keeps a CMA-ES state over the whole action sequence)."""
 MAX_BATCH = 10_000
 """The most episodes an emitter asks for at once."""
-EVOLUTION_STRATEGIES = ("cma_es", "sep_cma_es", "lm_ma_es")
-"""The emitters' evolution strategies (pyribs' names): full covariance, diagonal, limited
-memory."""
 DEFAULT_MEASURES = ("bearing", "robot_speed", "emergency_stop")
 """The archive's axes unless ``measures`` says otherwise."""
 MAX_STATE_BYTES = 2 * 1024**3

@@ -82,8 +82,8 @@ class SearchParams(BaseModel):
                     raise ValueError(f"{old}: is the earlier name of {new}: give only {new}")
                 data[new] = data.pop(old)
         flags = {new: data.pop(old) for old, new in SPACE_FLAGS.items() if old in data}
-        if flags and "space" in cls.model_fields:
-            space = data.get("space", "open")
+        space = data.get("space", "open")
+        if flags and "space" in cls.model_fields and isinstance(space, str | Mapping):
             space = {"kind": space} if isinstance(space, str) else dict(space)
             data["space"] = {**space, **flags}
         else:
