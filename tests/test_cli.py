@@ -99,7 +99,7 @@ def test_the_new_sut_folder_runs_its_readme_commands_unmodified(tmp_path: Path) 
         )
         assert config["run"]["controller"]["path"] == "my_controller:MyController"
     found = {(e["field"], e["tester"]): e["failures"] for e in summary["runs"]}
-    assert found[("none", "cem")] > found[("none", "random")]
+    assert found[("none", "portfolio")] > found[("none", "random")]
     report = command("report", "results", cwd=folder)
     assert report.returncode == 0, report.stderr
     assert (folder / "results" / "report" / "index.html").is_file()
