@@ -6,6 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hazardhunt.analysis import verdict
+from hazardhunt.analysis.results import load_results
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import record_run
 from hazardhunt.sim.simulation import Simulation
@@ -51,6 +53,9 @@ def test_the_default_portfolio_says_which_arm_found_each_class_first(tmp_path):
     for failure_class, (arm, episode) in first.items():
         assert played_by["arm"][episode] == arm
         assert failures.loc[episode, "class"] == failure_class
+    # The report's verdict says the same, read from the stored results.
+    shown = verdict.arms_found(load_results(tmp_path / "run"))
+    assert {row["class"]: (row["arm"], row["episode"]) for _, row in shown.iterrows()} == first
 
 
 def test_an_arm_that_raises_is_dropped_and_the_others_spend_the_budget(tmp_path, monkeypatch):
