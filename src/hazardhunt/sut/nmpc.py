@@ -43,8 +43,46 @@ _STAGE = 9
 """Variables of a stage in the stage table: the state, then acceleration (m/s^2), yaw
 acceleration (rad/s^2), obstacle slack (m) and keep-out slack (m^2)."""
 _SPEED, _YAW_RATE = 3, 4
-_ACCELERATIONS = slice(5, 7)
+_ACCELERATION, _YAW_ACCELERATION = 5, 6
+_ACCELERATIONS = slice(_ACCELERATION, _YAW_ACCELERATION + 1)
 _OBSTACLE_SLACK, _KEEP_OUT_SLACK = 7, 8
+
+_REFERENCE_SIZE = 5
+"""Columns of a stage's reference (:func:`_reference`): the point (m), the route's unit tangent
+and the speed (m/s). A stage's parameter row is the reference, then the obstacle slots' normals
+(2 each) and offsets (1 each), then the keep-out columns (:func:`_keep_out`)."""
+_KEEP_OUT_SIZE = 7
+"""Keep-out columns of a stage: the human's position, the half-plane normal, the weights of the
+exact and linearised rows, and the relief."""
+_HUMAN, _NORMAL = slice(0, 2), slice(2, 4)
+_EXACT_WEIGHT, _LINEAR_WEIGHT, _RELIEF = 4, 5, 6
+"""Where each quantity sits among the keep-out columns."""
+
+
+@dataclass(frozen=True)
+class _StageLayout:
+    """Where each quantity sits in a stage's parameter row, for ``slots`` obstacle slots."""
+
+    slots: int
+
+    @property
+    def normals(self) -> slice:
+        return slice(_REFERENCE_SIZE, _REFERENCE_SIZE + 2 * self.slots)
+
+    @property
+    def offsets(self) -> slice:
+        return slice(_REFERENCE_SIZE + 2 * self.slots, self.keep_out)
+
+    @property
+    def keep_out(self) -> int:
+        """The first keep-out column."""
+        return _REFERENCE_SIZE + 3 * self.slots
+
+    @property
+    def size(self) -> int:
+        return self.keep_out + _KEEP_OUT_SIZE
+
+
 _DISABLED_OFFSET = -1.0
 """Right-hand side of an unused obstacle slot: with a zero normal the row reads slack >= -1."""
 _BOX_MARGIN = 1e-6
@@ -405,7 +443,8 @@ class _Problem:
 
     def __init__(self, params: NMPCParams, robot: RobotParams) -> None:
         self.params = params
-        self.parameter_size = 12 + 3 * params.obstacle_slots
+        self.layout = _StageLayout(params.obstacle_slots)
+        self.parameter_size = self.layout.size
         nlp, equality, dynamics_rows, path_rows = self._formulate()
         # Warm-started solves start close to the solution and use a small barrier parameter;
         # from a rollout (first call, after an emergency stop or a failure) the solver's own
@@ -455,8 +494,8 @@ class _Problem:
 
         for k in range(horizon):
             current, following = stage_variables[k], stage_variables[k + 1]
-            cost += params.acceleration_weight * current[5] ** 2
-            cost += params.yaw_acceleration_weight * current[6] ** 2
+            cost += params.acceleration_weight * current[_ACCELERATION] ** 2
+            cost += params.yaw_acceleration_weight * current[_YAW_ACCELERATION] ** 2
             dynamics = following[:_STATE] - step(current[:_STATE], current[_ACCELERATIONS])
             dynamics_rows.append(add(dynamics, True))
             if k == 0:
@@ -465,13 +504,19 @@ class _Problem:
                 path_rows.append(add(current[:_STATE] - measured, True))
                 continue
             stage_cost, path = self._stage_terms(
-                current[:_STATE], current[7], current[8], stage_parameters[:, k - 1]
+                current[:_STATE],
+                current[_OBSTACLE_SLACK],
+                current[_KEEP_OUT_SLACK],
+                stage_parameters[:, k - 1],
             )
             cost += stage_cost
             path_rows.append(add(path, False))
         final = stage_variables[horizon]
         stage_cost, path = self._stage_terms(
-            final[:_STATE], final[5], final[6], stage_parameters[:, horizon - 1]
+            final[:_STATE],
+            final[_ACCELERATION],
+            final[_YAW_ACCELERATION],
+            stage_parameters[:, horizon - 1],
         )
         cost += stage_cost
         path_rows.append(add(path, False))
@@ -490,12 +535,13 @@ class _Problem:
         p, slots = self.params, self.params.obstacle_slots
         x, y, heading, speed = state[0], state[1], state[2], state[3]
         reference, tangent, speed_reference = parameters[0:2], parameters[2:4], parameters[4]
-        normals = ca.reshape(parameters[5 : 5 + 2 * slots], 2, slots)
-        offsets = parameters[5 + 2 * slots : 5 + 3 * slots]
-        human = parameters[5 + 3 * slots : 7 + 3 * slots]
-        human_normal = parameters[7 + 3 * slots : 9 + 3 * slots]
-        exact_weight, linear_weight = parameters[9 + 3 * slots], parameters[10 + 3 * slots]
-        relief = parameters[11 + 3 * slots]
+        layout = self.layout
+        normals = ca.reshape(parameters[layout.normals], 2, slots)
+        offsets = parameters[layout.offsets]
+        keep_out = parameters[layout.keep_out :]
+        human, human_normal = keep_out[_HUMAN], keep_out[_NORMAL]
+        exact_weight, linear_weight = keep_out[_EXACT_WEIGHT], keep_out[_LINEAR_WEIGHT]
+        relief = keep_out[_RELIEF]
         lateral = tangent[0] * (y - reference[1]) - tangent[1] * (x - reference[0])
         # |(cos, sin) - tangent|^2 less its constant 2: no wrap-around, cheap derivatives.
         heading_error = -2.0 * (tangent[0] * ca.cos(heading) + tangent[1] * ca.sin(heading))
@@ -562,8 +608,10 @@ class _Problem:
         upper = np.full((horizon + 1, _STAGE), np.inf)
         lower[1:, _SPEED], upper[1:, _SPEED] = 0.0, robot.max_speed
         lower[1:, _YAW_RATE], upper[1:, _YAW_RATE] = -robot.max_yaw_rate, robot.max_yaw_rate
-        lower[:, 5], upper[:, 5] = -robot.max_acceleration, robot.max_acceleration
-        lower[:, 6], upper[:, 6] = -robot.max_yaw_acceleration, robot.max_yaw_acceleration
+        lower[:, _ACCELERATION] = -robot.max_acceleration
+        upper[:, _ACCELERATION] = robot.max_acceleration
+        lower[:, _YAW_ACCELERATION] = -robot.max_yaw_acceleration
+        upper[:, _YAW_ACCELERATION] = robot.max_yaw_acceleration
         lower[:, _OBSTACLE_SLACK:] = 0.0
         upper[0, _OBSTACLE_SLACK:] = 0.0  # stage 0 has no obstacle or keep-out constraints
         self.bounds: dict[str, FloatArray] = {
@@ -592,14 +640,14 @@ class _Problem:
             offsets: Shape (N, M): their right-hand sides, in m.
             keep_out: Shape (N, 7): from :func:`_keep_out`.
         """
-        horizon, slots = self.params.horizon, self.params.obstacle_slots
+        horizon, layout = self.params.horizon, self.layout
         flat = np.empty(_STATE + horizon * self.parameter_size)
         flat[:_STATE] = measured
         table = flat[_STATE:].reshape(horizon, self.parameter_size)
-        table[:, :5] = reference
-        table[:, 5 : 5 + 2 * slots] = normals.reshape(horizon, 2 * slots)
-        table[:, 5 + 2 * slots : 5 + 3 * slots] = offsets
-        table[:, 5 + 3 * slots :] = keep_out
+        table[:, :_REFERENCE_SIZE] = reference
+        table[:, layout.normals] = normals.reshape(horizon, 2 * layout.slots)
+        table[:, layout.offsets] = offsets
+        table[:, layout.keep_out :] = keep_out
         return flat
 
     def solve(self, guess: _Plan, parameters: FloatArray, warm: bool) -> _Outcome:
@@ -830,9 +878,9 @@ def _keep_out(
     inactive, rather than a copy of the slack's own bound, which would leave two active
     constraints on one variable.
     """
-    table = np.zeros((params.horizon, 7))
+    table = np.zeros((params.horizon, _KEEP_OUT_SIZE))
     if predicted_human is None:
-        table[:, 6] = 1.0
+        table[:, _RELIEF] = 1.0
         return table
     away = stages[1:, :2] - predicted_human
     distance = np.hypot(away[:, 0], away[:, 1])
@@ -855,10 +903,10 @@ def _keep_out(
             ),
         )
     linear = distance < params.keep_out_radius
-    table[:, 0:2] = predicted_human
-    table[:, 2:4] = normal
-    table[:, 4] = ~linear
-    table[:, 5] = linear * (2.0 * params.keep_out_radius)
+    table[:, _HUMAN] = predicted_human
+    table[:, _NORMAL] = normal
+    table[:, _EXACT_WEIGHT] = ~linear
+    table[:, _LINEAR_WEIGHT] = linear * (2.0 * params.keep_out_radius)
     return table
 
 
@@ -894,7 +942,7 @@ def _reference(route: Route, progress: float, params: NMPCParams) -> FloatArray:
             arc_length = length - half_deceleration * (to_stop * to_stop)
         speed = deceleration * to_stop
         rows += (*route.frame_at(arc_length), cruise if cruise <= speed else speed)
-    return np.array(rows).reshape(-1, 5)
+    return np.array(rows).reshape(-1, _REFERENCE_SIZE)
 
 
 class _Obstacles:
