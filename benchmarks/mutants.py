@@ -1,6 +1,6 @@
 """The mutation benchmark: how many planted bugs each tester finds within a budget.
 
-The system under test is :class:`hazardhunt.sut.conservative.ConservativeController`, which no
+The system under test is :class:`hazardhunt.benchmark.conservative.ConservativeController`, which no
 human can make fail, and each of its mutants (one narrow planted bug each; see
 docs/search-methods.md). For every tester x scenario x field x seed x SUT, one run of
 ``--episodes`` episodes; a mutant is *killed* when the run finds a failure, and the episode of
@@ -34,13 +34,13 @@ from typing import Any
 import tomllib
 from pydantic import ValidationError
 
+from hazardhunt.benchmark.conservative import MUTANTS, ConservativeController
 from hazardhunt.campaign.config import PluginSpec, RunConfig
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import write_json_atomic
-from hazardhunt.sut.conservative import MUTANTS, ConservativeController
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, format_validation_error
 
-MODULE = "hazardhunt.sut.conservative"
+MODULE = "hazardhunt.benchmark.conservative"
 ORIGINAL = ConservativeController.__name__
 
 

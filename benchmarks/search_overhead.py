@@ -27,7 +27,7 @@ from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecorder
 from hazardhunt.testers.evaluator import EpisodeEvaluator
 
-CONTROLLER = "hazardhunt.sut.conservative:ConservativeController"
+CONTROLLER = "hazardhunt.benchmark.conservative:ConservativeController"
 
 
 def measure(tester: str, params: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:

@@ -43,7 +43,7 @@ def controller_named(name: str) -> Controller | None:
 
         return PursuitController()
     if name == "conservative":
-        from hazardhunt.sut.conservative import ConservativeController
+        from hazardhunt.benchmark.conservative import ConservativeController
 
         return ConservativeController()
     return None

@@ -23,8 +23,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.benchmark.conservative import ConservativeController
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.sut.conservative import ConservativeController
 from hazardhunt.testers.clear_path import clear_action
 from hazardhunt.testers.random_sampling import RandomTester
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS

@@ -20,6 +20,7 @@ from pathlib import Path
 
 LAYERS = (
     "templates",  # files `hazardhunt new-sut` writes for a user to edit: nothing imports them
+    "benchmark",  # the benchmarks' own systems under test, plug-ins: nothing imports them
     "cli",
     "cases",
     "analysis",
@@ -41,7 +42,7 @@ SOURCE = Path(__file__).resolve().parents[1] / "src" / "hazardhunt"
 def package_of(path: Path) -> str:
     """The layer a module belongs to (``""`` for the package root)."""
     parts = path.relative_to(SOURCE).with_suffix("").parts
-    if parts == ("__init__",):
+    if len(parts) == 1 and parts[0] not in LAYERS:  # a module of the root: __init__, errors
         return ""
     return parts[0]
 
@@ -58,7 +59,8 @@ def imported_packages(tree: ast.AST) -> set[tuple[str, int]]:
         for name in names:
             parts = name.split(".")
             if parts[0] == "hazardhunt":
-                found.add((parts[1] if len(parts) > 1 else "", node.lineno))
+                package = parts[1] if len(parts) > 1 else ""
+                found.add((package if package in LAYERS else "", node.lineno))
     return found
 
 

@@ -38,7 +38,7 @@ def run_tables(run_directory: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
 MARKER_MODULE = """
 from pathlib import Path
 
-from hazardhunt.sut.conservative import ConservativeController as Controller
+from hazardhunt.benchmark.conservative import ConservativeController as Controller
 
 Path({marker!r}).touch()  # proof that the module was imported
 """

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import gymnasium
 
-__version__ = "0.1.0"
+__version__ = "0.2.0.dev0"
 
 ENV_ID = "hazardhunt/AGV-v0"
 

@@ -21,12 +21,14 @@ from rich.progress import Progress
 from rich.table import Table
 
 from hazardhunt.campaign.config import ConfigError
+from hazardhunt.errors import HazardhuntError
 from hazardhunt.testers.registry import TESTERS, is_import_path
-from hazardhunt.world.scenario import BUILTIN_SCENARIOS, ScenarioError
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
+    from hazardhunt.cases import RegressionResult
 
 app = typer.Typer(
     help="Find the human behaviours that make a robot's control stack unsafe.",
@@ -156,7 +158,7 @@ RunClassifierOption = Annotated[
     str | None,
     typer.Option(
         help="Your failure classifier as package.module:Class, instead of the built-in one (or, "
-        "for campaign, of the campaign file's [classifier])."
+        "for campaign, of the campaign file's \\[classifier] table)."
     ),
 ]
 ReadClassifierOption = Annotated[
@@ -185,6 +187,27 @@ RegressClassifierOption = Annotated[
 ]
 
 
+EpisodesOption = Annotated[
+    int | None,
+    typer.Option(help="Budget of episodes [default: 20,000, the study's, about half an hour]."),
+]
+TesterParamOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="A tester parameter as KEY=VALUE (TOML value), e.g. n_envs=2 or n_steps=1024; "
+        "repeat for several."
+    ),
+]
+SutErrorLimitOption = Annotated[
+    float,
+    typer.Option(
+        help="Fail the run once this share of its episodes ended in a SUT error (the "
+        "controller or safety layer raised, hung or returned something unusable); 1: when "
+        "every one did."
+    ),
+]
+
+
 @app.command("run")
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
@@ -193,29 +216,29 @@ def run_command(
     tester: Annotated[
         str, typer.Option(help=f"{', '.join(TESTERS)}, or yours as package.module:Class.")
     ] = "portfolio",
-    episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 20_000,
+    episodes: EpisodesOption = None,
     seed: Annotated[int, typer.Option(help="Seed of the run.")] = 0,
     decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
     controller_timeout: ControllerTimeoutOption = None,
-    tester_param: Annotated[
-        list[str] | None,
-        typer.Option(
-            help="A tester parameter as KEY=VALUE (TOML value), e.g. n_envs=2 or n_steps=1024; "
-            "repeat for several."
-        ),
-    ] = None,
+    tester_param: TesterParamOption = None,
     controller: ControllerOption = None,
     controller_param: ControllerParamOption = None,
     safety_layer: SafetyLayerOption = None,
     safety_layer_param: SafetyLayerParamOption = None,
     classifier: RunClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
+    sut_error_limit: SutErrorLimitOption = 1.0,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
 ) -> None:
-    """Run one tester on one scenario and field setting for a budget of episodes."""
+    """Run one tester on one scenario and field setting for a budget of episodes.
+
+    Exits with code 1 when the run tested nothing (every episode, or --sut-error-limit of
+    them, ended in a SUT error) or could not write its results; 2 for bad input, before
+    anything is written (a plug-in that fails on a trial episode included).
+    """
     from hazardhunt.campaign.config import (
         EnvOptions,
         RunConfig,
@@ -231,7 +254,7 @@ def run_command(
             tester_plugin=tester_plugin,
             tester=tester,
             seed=seed,
-            episodes=episodes,
+            episodes=DEFAULT_EPISODES if episodes is None else episodes,
             env=EnvOptions(
                 decision_period=decision_period,
                 solver=solver,
@@ -241,11 +264,26 @@ def run_command(
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
             classifier=_plugin("--classifier", classifier, classifier_param),
+            sut_error_limit=sut_error_limit,
         )
     )
     check_plugins(config)
     check_output_location(out)
+    if episodes is None:
+        _say_default_budget()
     _execute_and_print(config, out, json_output)
+
+
+def _say_default_budget() -> None:
+    err_console.print(
+        f"playing {DEFAULT_EPISODES:,} episodes, the study's budget (about half an hour with "
+        "the built-in NMPC on one core); --episodes sets another",
+        highlight=False,
+    )
+
+
+DEFAULT_EPISODES = 20_000
+"""The budget of ``hazardhunt run`` without ``--episodes``: a run of the study."""
 
 
 def _execute_and_print(config: RunConfig, out: Path, json_output: bool) -> None:
@@ -545,7 +583,9 @@ def regress(
     A case whose controller or safety layer is a plug-in re-runs only with a plug-in named
     (--controller, --safety-layer) or with --trust-plugins: a case file is data.
 
-    Exits with code 1 while any case still fails or changed, so that it can gate a CI job.
+    Exits with code 1 while any case still fails or changed, so that it can gate a CI job, and
+    with 3 when some case could not be tested at all (the SUT raised, hung or returned something
+    unusable: verdict "error").
     """
     from hazardhunt.cases import VERDICTS, case_files, regress_case
 
@@ -574,16 +614,35 @@ def regress(
     if json_output:
         print(json.dumps({"cases": [vars(r) for r in results], "counts": counts}))
     else:
-        colours = {"still fails": "red", "changed": "yellow", "fixed": "green"}
-        table = Table("case", "expected", "now", "at (s)", "verdict")
-        for r in results:
-            now = r.failure_class if r.failure_class is not None else r.outcome
-            verdict = f"[{colours[r.verdict]}]{r.verdict}[/{colours[r.verdict]}]"
-            table.add_row(r.case, r.expected_class, now, f"{r.sim_time:.2f}", verdict)
-        console.print(table)
-        console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
+        _print_regress(results, counts)
+    if counts["error"]:
+        raise typer.Exit(REGRESS_UNTESTED)
     if counts["still fails"] or counts["changed"]:
         raise typer.Exit(1)
+
+
+def _print_regress(results: list[RegressionResult], counts: dict[str, int]) -> None:
+    """The table of re-run cases, their counts, and each case that could not be tested."""
+    colours = {"still fails": "red", "changed": "yellow", "error": "red", "fixed": "green"}
+    table = Table("case", "expected", "now", "at (s)", "verdict")
+    for r in results:
+        now = r.failure_class if r.failure_class is not None else r.outcome
+        verdict = f"[{colours[r.verdict]}]{r.verdict}[/{colours[r.verdict]}]"
+        table.add_row(
+            escape(r.case), escape(r.expected_class), escape(now), f"{r.sim_time:.2f}", verdict
+        )
+    console.print(table)
+    console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
+    for r in results:
+        if r.error is not None:
+            err_console.print(
+                f"[red]error:[/red] {escape(r.case)}: the SUT erred and the case tested "
+                f"nothing: {escape(r.error)}"
+            )
+
+
+REGRESS_UNTESTED = 3
+"""``regress``'s exit code when some case could not be tested (its SUT erred)."""
 
 
 @app.command("new-sut")
@@ -621,31 +680,45 @@ def _validated(build: Callable[[], T]) -> T:
 
 
 def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
-    table = Table("episodes", "failures", "safe contacts", "stalls", "wall time (s)", "episodes/s")
+    sut_errors = summary["sut_errors"]
+    table = Table(
+        "episodes",
+        "failures",
+        "SUT errors",
+        "safe contacts",
+        "stalls",
+        "wall time (s)",
+        "episodes/s",
+    )
     table.add_row(
         str(summary["episodes"]),
         str(summary["failures"]),
+        f"[red]{sut_errors}[/red]" if sut_errors else "0",
         str(summary["safe_contacts"]),
         str(summary["stalls"]),
         f"{summary['wall_time_s']:.1f}",
         f"{summary['episodes_per_s']:.2f}",
     )
     console.print(table)
+    if sut_errors:
+        first = summary.get("first_sut_error") or {}
+        console.print(
+            f"[red]warning: {sut_errors} of {summary['episodes']} episodes ended in a SUT error "
+            "and tested nothing[/red]; the first, episode "
+            f"{first.get('episode')}: {escape(str(first.get('error')))}",
+            highlight=False,
+        )
     console.print(f"results in [bold]{out.resolve()}[/bold]")
 
 
 def run() -> None:
-    """Entry point: an input error is one clear line on stderr and exit code 2, a file that
-    cannot be written one line and exit code 1, and Ctrl-C says how to resume."""
-    from hazardhunt.analysis.results import ResultsError
-    from hazardhunt.campaign.replay import ReplayError
-    from hazardhunt.cases import CaseError
-    from hazardhunt.sut.plugins import PluginError
-
+    """Entry point: an error hazardhunt raises is one clear line on stderr and its exit code (2
+    for bad input, see :mod:`hazardhunt.errors`), a file that cannot be written one line and
+    exit code 1, and Ctrl-C says how to resume."""
     try:
         app()
-    except (ScenarioError, ConfigError, ReplayError, ResultsError, CaseError, PluginError) as error:
-        _exit_with(str(error), 2)
+    except HazardhuntError as error:  # an input error exits 2 (InputError), the others 1
+        _exit_with(str(error), error.exit_code)
     except OSError as error:
         where = f"{error.filename}: " if error.filename else ""
         _exit_with(f"{where}{error.strerror or error}", 1)

@@ -29,7 +29,7 @@ from hazardhunt.campaign.config import load_campaign
 from hazardhunt.campaign.run import is_complete
 from tests.helpers import hazardhunt, run_tables
 
-CONTROLLER = "hazardhunt.sut.conservative:ConservativeController"
+CONTROLLER = "hazardhunt.benchmark.conservative:ConservativeController"
 
 MISBEHAVING = '''
     """Testers that misbehave as a machine can."""

@@ -40,6 +40,16 @@ RAISING = """
                 raise RuntimeError("lost the localisation")
             return ControlCommand(speed=0.5, yaw_rate=0.0)
 
+    class RaisingOnceTheHumanMoves(Raising):
+        # Works against a human standing still (the trial episode before a run).
+
+        def control(self, time, robot, human):
+            if human is not None and len(human.recent_positions) > 1:
+                last, before = human.recent_positions[-1], human.recent_positions[-2]
+                if abs(last - before).max() > 1e-6:
+                    raise RuntimeError("lost the localisation")
+            return ControlCommand(speed=0.5, yaw_rate=0.0)
+
     class NotAController:
         def control(self, time, robot, human):
             pass
@@ -139,24 +149,28 @@ def test_worker_processes_load_a_controller_found_only_in_the_working_directory(
     options = [item for param in params for item in ("--tester-param", param)]
     done = hazardhunt(
         "run", "--scenario", "head-on", "--field", "none", "--tester", tester, *options,
-        "--episodes", 4, "--out", out, "--json", "--controller", "my_sut:Raising", cwd=tmp_path,
+        "--episodes", 4, "--out", out, "--json",
+        "--controller", "my_sut:RaisingOnceTheHumanMoves", cwd=tmp_path,
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout)["sut_errors"] == 4  # the plug-in ran in the workers
+    # The plug-in ran in the workers: it raised there in every episode, which fails the run.
+    assert done.returncode == 1
+    assert "every one of its 4 episodes ended in a SUT error" in done.stderr
+    assert "RuntimeError: lost the localisation" in done.stderr
 
 
-def test_a_controller_that_raises_is_a_recorded_sut_error(tmp_path):
+def test_a_controller_that_raises_on_the_trial_episode_is_one_line_and_runs_nothing(tmp_path):
     plugin_module(tmp_path, RAISING)
     out = tmp_path / "run"
     done = hazardhunt(
         "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
         "--episodes", 3, "--out", out, "--json", "--controller", "my_sut:Raising", cwd=tmp_path,
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout)["sut_errors"] == 3
-    episodes = pd.read_parquet(out / "episodes.parquet")
-    assert set(episodes["outcome"]) == {"sut_error"}
-    assert all("RuntimeError: lost the localisation" in e for e in episodes["controller_errors"])
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        "error: controller 'my_sut:Raising': control() raised RuntimeError: lost the "
+        "localisation (on a trial episode before the run; nothing was run)"
+    )
+    assert not out.exists()
 
 
 def test_the_laser_field_with_side_bands_loads_as_a_safety_layer():
@@ -209,7 +223,7 @@ COUNTING = """
                 log.write("built\\n")
             self.cruise_speed = cruise_speed
 
-        def reset(self, floor, route, robot):
+        def reset(self, floor, route, robot, params):
             pass
 
         def control(self, time, robot, human):

@@ -205,7 +205,7 @@ def test_case_files_hold_the_recorded_actions_and_times_bit_for_bit(run, cases):
         assert case["expected"]["sim_time"] == recorded["sim_time"]
 
 
-def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):
+def test_a_controller_that_raises_instead_leaves_every_case_untested(cases, tmp_path):
     (tmp_path / "crashing.py").write_text(
         "class Crashing:\n"
         "    control_period = 0.2\n"
@@ -215,10 +215,15 @@ def test_a_controller_that_raises_instead_changes_every_case(cases, tmp_path):
         "        raise RuntimeError('no route')\n"
     )
     done = hazardhunt("regress", cases, "--json", "--controller", "crashing:Crashing", cwd=tmp_path)
-    assert done.returncode == 1
+    assert done.returncode == 3  # neither "fixed" (0) nor "still fails" (1)
     report = json.loads(done.stdout)
-    assert {c["verdict"] for c in report["cases"]} == {"changed"}
+    assert {c["verdict"] for c in report["cases"]} == {"error"}
     assert {c["outcome"] for c in report["cases"]} == {"sut_error"}
+    assert {c["error"] for c in report["cases"]} == {"controller: RuntimeError: no route"}
+    shown = hazardhunt("regress", cases, "--controller", "crashing:Crashing", cwd=tmp_path)
+    assert shown.returncode == 3
+    assert "error" in shown.stdout
+    assert "the SUT erred and the case tested nothing" in shown.stderr
 
 
 def case_file(folder: Path, controller: dict[str, object], name: str = "received") -> Path:

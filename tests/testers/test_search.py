@@ -232,7 +232,7 @@ def test_the_boundary_probes_catch_a_robot_that_docks_blind(tester, params, tmp_
             tester_params={**params, "space": "route", "clear_path": True, "probes": probes},
             seed=0,
             episodes=12,
-            controller=PluginSpec(path="hazardhunt.sut.conservative:DockingMode"),
+            controller=PluginSpec(path="hazardhunt.benchmark.conservative:DockingMode"),
         )
         return record_run(config, tmp_path / name)
 

@@ -643,10 +643,22 @@ def _verdict(report: _Report, results: Results) -> None:
 def _headline(findings: verdict.Verdict) -> str:
     """The verdict in one sentence or two, numbers in bold."""
     played = f"in {findings.episodes} episodes of {findings.runs} run{_s(findings.runs)}"
+    untested = ""
+    if findings.sut_errors:
+        share = findings.sut_errors / max(findings.episodes, 1)
+        untested = (
+            f' <strong class="warning">{findings.sut_errors} of these episodes ({share:.0%}) '
+            "ended in a SUT error and tested nothing</strong> (the controller or safety layer "
+            "raised, hung or returned something unusable; the runs' episode tables name each "
+            "error)."
+        )
     if not findings.failures:
+        if findings.sut_errors >= findings.episodes:
+            return f"<strong>Nothing was tested</strong> {played}.{untested}"
         return (
             f"<strong>No unsafe failure</strong> {played}: the failure rate is below "
-            f"{findings.rate_bound:.2g} per episode (95 % confidence, Clopper-Pearson)."
+            f"{findings.rate_bound:.2g} per tested episode (95 % confidence, "
+            f"Clopper-Pearson).{untested}"
         )
     classes = len(findings.classes)
     text = (
@@ -661,7 +673,7 @@ def _headline(findings: verdict.Verdict) -> str:
             f"; their trajectories form <strong>{findings.clusters} "
             f"cluster{_s(findings.clusters)}</strong>"
         )
-    return text + "."
+    return text + "." + untested
 
 
 def _worst_facts(worst: pd.Series) -> str:
@@ -738,6 +750,7 @@ def _verdict_summary(report: _Report) -> dict[str, Any] | None:
         "unclassified_failures": findings.unclassified,
         "clusters": findings.clusters,
         "failure_rate_upper_bound": findings.rate_bound,
+        "sut_errors": findings.sut_errors,
     }
 
 

@@ -15,6 +15,7 @@ from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import find_damage, left_out
+from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
@@ -29,7 +30,7 @@ RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
 
 
-class ResultsError(ValueError):
+class ResultsError(InputError):
     """The directory holds no results that can be read."""
 
 

@@ -35,7 +35,11 @@ class Verdict:
     """Clusters of all failures' trajectories together (None: no failure's trajectory is
     stored)."""
     rate_bound: float
-    """Upper end of the 95 % Clopper-Pearson interval of the failure rate, all runs pooled."""
+    """Upper end of the 95 % Clopper-Pearson interval of the failure rate, all runs pooled,
+    over the episodes that tested the system (``sut_error`` episodes left out)."""
+    sut_errors: int = 0
+    """Episodes that ended in ``sut_error``: the controller or safety layer raised, hung or
+    returned something unusable, so they tested nothing."""
 
 
 def verdict(results: Results, clusters: pd.DataFrame | None) -> Verdict:
@@ -45,6 +49,7 @@ def verdict(results: Results, clusters: pd.DataFrame | None) -> Verdict:
     found = set(failures["class"]) if "class" in failures else set()
     episodes = int(runs["episodes"].sum())
     count = int(runs["failures"].sum())
+    sut_errors = int(runs["sut_errors"].fillna(0).sum()) if "sut_errors" in runs else 0
     return Verdict(
         runs=len(runs),
         episodes=episodes,
@@ -52,7 +57,8 @@ def verdict(results: Results, clusters: pd.DataFrame | None) -> Verdict:
         classes=tuple(sorted(found - {OTHER})),
         unclassified=int((failures["class"] == OTHER).sum()) if "class" in failures else 0,
         clusters=_all_clusters(clusters),
-        rate_bound=tables.clopper_pearson(count, episodes)[1],
+        rate_bound=tables.clopper_pearson(count, episodes - sut_errors)[1],
+        sut_errors=sut_errors,
     )
 
 

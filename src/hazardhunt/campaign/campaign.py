@@ -62,6 +62,7 @@ from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.run import (
     RunProgress,
+    check_sut,
     execute_run_atomically,
     is_complete,
     is_finished,
@@ -69,6 +70,7 @@ from hazardhunt.campaign.run import (
     record_run,
 )
 from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
+from hazardhunt.errors import HazardhuntError
 
 EXECUTORS = ("local", "ray")
 """Where runs execute: a local process pool, or a Ray cluster."""
@@ -86,7 +88,7 @@ WORKER_DEATH_RETRIES = 2
 _PR_SET_PDEATHSIG = 1
 
 
-class CampaignFailed(Exception):  # noqa: N818 - names an outcome, as the command reports it
+class CampaignFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
     """Some runs raised while the others completed (``summary`` records which and why), or the
     campaign's ``summary.json`` could not be written."""
 
@@ -98,7 +100,7 @@ class CampaignFailed(Exception):  # noqa: N818 - names an outcome, as the comman
         self.summary = summary
 
 
-class WorkerDied(RuntimeError):  # noqa: N818 - names an outcome, as summary.json reports it
+class WorkerDied(HazardhuntError, RuntimeError):  # noqa: N818 - names an outcome, as summary.json reports it
     """The process executing a run ended without finishing it, every time it was tried."""
 
 
@@ -153,6 +155,7 @@ def run_campaign(
     Raises:
         ConfigError: ``out`` holds another campaign or something else, or another campaign
             process is writing it; nothing is written then.
+        PluginError: A plug-in of the SUT fails on a trial episode; nothing is written.
         CampaignFailed: After all other runs finished, if some runs raised (or their workers
             died every time they were tried), or if ``summary.json`` could not be written.
     """
@@ -162,6 +165,7 @@ def run_campaign(
         raise ValueError(f"workers must be at least 1, not {workers}")
     runs = config.runs()
     selected = selected_runs(runs, only)
+    _check_suts(selected)
     _check_directory(config, out)
     out.mkdir(parents=True, exist_ok=True)
     with exclusive_lock(out / ".lock", out, "campaign"):
@@ -192,6 +196,18 @@ def run_campaign(
     if summary["runs_failed"]:
         raise CampaignFailed(summary)
     return summary
+
+
+def _check_suts(runs: list[RunConfig]) -> None:
+    """Try each system under test the runs name on a trial episode (:func:`check_sut`), once
+    per controller, safety layer and environment: a plug-in that cannot run stops the
+    campaign before anything is written."""
+    tried: set[str] = set()
+    for run in runs:
+        sut = run.model_dump_json(include={"controller", "safety_layer", "env"})
+        if sut not in tried:
+            tried.add(sut)
+            check_sut(run)
 
 
 def selected_runs(runs: list[RunConfig], only: Sequence[str]) -> list[RunConfig]:
@@ -482,7 +498,10 @@ class _ProgressDisplay:
         self.runs_ended += 1
         self._show_episodes()
         if self.log is not None:
-            how = "complete" if outcome.summary is not None else "failed"
+            how = "failed"
+            if outcome.summary is not None:
+                errors = outcome.summary.get("sut_errors", 0)
+                how = "complete" + (f" with {errors} SUT errors" if errors else "")
             self.log(f"run {outcome.config.run_id} {how}: {self._standing()}")
             self.logged_at = time.monotonic()
 
@@ -842,10 +861,11 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
         groups.setdefault(key, []).append(entry)
-    table = Table("scenario", "field", "tester", "runs", "failures", "wall time (s)")
+    table = Table("scenario", "field", "tester", "runs", "failures", "SUT errors", "wall time (s)")
     for (scenario, field, tester), entries in groups.items():
         complete = [e for e in entries if e["status"] == "complete"]
         failures = [int(e["failures"]) for e in complete]
+        sut_errors = sum(int(e.get("sut_errors", 0)) for e in complete)
         wall_times = [float(e["wall_time_s"]) for e in complete]
         table.add_row(
             escape(shown_scenario(scenario)),
@@ -853,6 +873,7 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
             escape(tester),
             f"{len(complete)}/{len(entries)}",
             _mean_std(failures),
+            f"[red]{sut_errors}[/red]" if sut_errors else "0",
             f"{statistics.fmean(wall_times):.1f}" if wall_times else "-",
         )
     console.print(table)
@@ -864,6 +885,11 @@ def _print_report(console: Console, summary: dict[str, Any], out: Path) -> None:
         f"{summary['failures']} failures in {summary['episodes']} episodes; "
         f"results in [bold]{out.resolve()}[/bold] (summary.json, runs/)"
     )
+    if summary.get("sut_errors"):
+        console.print(
+            f"[red]warning: {summary['sut_errors']} episodes ended in a SUT error and tested "
+            "nothing[/red] (the column SUT errors; each run's first in its summary.json)"
+        )
     if summary["runs_failed"]:
         console.print(
             f"[red]runs that raised: {summary['runs_failed']}[/red] (errors in summary.json); "

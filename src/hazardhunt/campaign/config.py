@@ -32,6 +32,7 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
+from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import decisions_in, whole_multiple
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
@@ -53,7 +54,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError):
     """A run or campaign configuration that cannot be used; the message says what is wrong."""
 
 
@@ -67,6 +68,11 @@ Seconds = Annotated[float, Strict(), Field(gt=0)]
 
 MAX_EPISODE_DURATION = 3600.0
 """The longest episode, in s of simulated time."""
+
+SutErrorLimit = Annotated[float, Strict(), Field(gt=0, le=1)]
+"""The share of a run's episodes that, once they have ended in ``sut_error``, fails the run: a
+run that did not test its system under test must not read as a pass. 1 (the default): the run
+fails when every episode did."""
 
 
 class EnvOptions(_Strict):
@@ -278,6 +284,9 @@ class RunConfig(_Strict):
     """The safety layer; the laser field of ``field`` when None."""
     classifier: PluginSpec | None = None
     """Names each failure's class; the built-in mechanism taxonomy when None."""
+    sut_error_limit: SutErrorLimit = 1.0
+    """The run fails (its results are not kept) once this share of its episodes has ended in
+    ``sut_error``; 1: when every one did."""
 
     @field_validator("field")
     @classmethod
@@ -352,6 +361,9 @@ class CampaignConfig(_Strict):
     """The safety layer of every run (``[safety_layer]``); the laser field when None."""
     classifier: PluginSpec | None = None
     """The failure classifier of every run (``[classifier]``); the built-in one when None."""
+    sut_error_limit: SutErrorLimit = 1.0
+    """A run fails once this share of its episodes has ended in ``sut_error`` (see
+    :attr:`RunConfig.sut_error_limit`)."""
 
     @field_validator("fields")
     @classmethod
@@ -435,6 +447,7 @@ class CampaignConfig(_Strict):
                 controller=self.controller,
                 safety_layer=self.safety_layer,
                 classifier=self.classifier,
+                sut_error_limit=self.sut_error_limit,
             )
             for scenario in self.scenarios
             for field in self.fields

@@ -19,7 +19,11 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict
 
-from hazardhunt.spec.failure_classes import FailureClassifier, MechanismClassifier
+from hazardhunt.spec.failure_classes import (
+    FailureClassifier,
+    MechanismClassifier,
+    adapt_classifier,
+)
 from hazardhunt.sut.plugins import PluginError, build, build_controller, build_safety_layer
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 from hazardhunt.testers.base import Tester
@@ -123,11 +127,12 @@ def make_classifier(
     :class:`~hazardhunt.spec.failure_classes.MechanismClassifier` for ``robot``.
 
     Raises:
-        PluginError: The plug-in does not load or does not fit the FailureClassifier protocol.
+        PluginError: The plug-in does not load or does not fit the FailureClassifier protocol
+            (one written for the protocol before 0.2.0 is adapted).
     """
     if spec is None:
         return MechanismClassifier(robot=robot)
     classifier: FailureClassifier = build(
         "failure classifier", spec.path, spec.params, FailureClassifier, spec.search_path
     )
-    return classifier
+    return adapt_classifier(spec.path, classifier)

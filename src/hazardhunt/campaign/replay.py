@@ -19,13 +19,14 @@ import pandas as pd
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import simulation_of
+from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""
 
 
-class ReplayError(ValueError):
+class ReplayError(InputError):
     """The run directory or failure does not exist."""
 
 

@@ -24,6 +24,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -47,6 +48,7 @@ from hazardhunt.campaign.plugins import (
 )
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.errors import HazardhuntError, PluginError
 from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.spec.outcomes import TerminationParams
@@ -64,6 +66,9 @@ class RunProgress:
     episodes: int
     failures: int
     elapsed_s: float
+    sut_errors: int = 0
+    """Episodes that ended in ``sut_error``: the system under test raised, hung or returned
+    something unusable, so they tested nothing."""
 
 
 ProgressCallback = Callable[[RunProgress], None]
@@ -104,6 +109,43 @@ def simulation_of(config: RunConfig) -> Simulation:
     return build_simulation(
         config.scenario, config.field, config.env, config.controller, config.safety_layer
     )
+
+
+TRIAL_ACTION = np.array([-1.0, 0.0])
+"""The human's action on the trial episode of :func:`check_sut`: standing still."""
+
+
+def check_sut(config: RunConfig) -> None:
+    """Exercise the run's controller and safety-layer plug-ins once on a trial episode (reset,
+    then one decision of a human standing still, against a simulation of its own), so that a
+    plug-in that cannot run stops the run before anything is written, instead of making every
+    episode a ``sut_error``. The built-in SUT is not tried.
+
+    Raises:
+        PluginError: A plug-in does not load, or raised, hung or returned something unusable
+            on the trial episode: one line naming the plug-in, the method and the error.
+        ConfigError: The periods do not fit.
+    """
+    if config.controller is None and config.safety_layer is None:
+        return
+    simulation = simulation_of(config)
+    simulation.reset()
+    simulation.decide(TRIAL_ACTION)
+    summary = simulation.summary()
+    tried = (
+        ("controller", config.controller, summary.controller_errors, "control()"),
+        ("safety layer", config.safety_layer, summary.safety_layer_errors, "update()"),
+    )
+    for kind, spec, errors, call in tried:
+        if not errors:
+            continue
+        name = "the built-in one" if spec is None else repr(spec.path)
+        error = errors[0]
+        if call not in error and not error.startswith("reset()"):
+            error = f"{call} raised {error}"
+        raise PluginError(
+            f"{kind} {name}: {error} (on a trial episode before the run; nothing was run)"
+        )
 
 
 def make_run_tester(config: RunConfig) -> Tester:
@@ -148,12 +190,8 @@ def record_run(
             "started_at": started_at,
         },
     )
-    replay_keys = {
-        "scenario": config.scenario,
-        "field": config.field,
-        "seed": config.seed,
-        "decision_period": config.env.decision_period,
-    }
+    replay_keys = {"scenario": config.scenario, "field": config.field, "seed": config.seed}
+    replay_keys["decision_period"] = config.env.decision_period
     store = RunStore(directory, replay_keys, classifier, simulation.field)
     clock = time.perf_counter()
 
@@ -161,7 +199,10 @@ def record_run(
         store.add(record)
         if progress is not None:
             elapsed = time.perf_counter() - clock
-            progress(RunProgress(record.episode + 1, config.episodes, store.failure_count, elapsed))
+            done, failures = record.episode + 1, store.failure_count
+            progress(RunProgress(done, config.episodes, failures, elapsed, store.sut_error_count))
+        if store.sut_error_count >= config.sut_error_limit * config.episodes:
+            raise NothingTested(config, store)  # the run can no longer pass
 
     recorder = EpisodeRecorder(
         AGVEnv.wrapping(simulation, reward_of(tester)),
@@ -174,6 +215,8 @@ def record_run(
         tester.explore(recorder, config.episodes)
     finally:
         recorder.close()  # the worker processes of batches played on several cores
+    if store.sut_error_count >= config.sut_error_limit * len(store.episodes):
+        raise NothingTested(config, store)  # a tester that plays fewer episodes than its budget
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock
@@ -201,6 +244,7 @@ def _run_summary(
         "first_failure_episode": next(
             (i for i, outcome in enumerate(outcomes) if outcome == "failure"), None
         ),
+        "first_sut_error": store.first_sut_error,
         "field_shape": asdict(field),
         "classifier": classifier.name,
         "classes": store.classes,
@@ -217,8 +261,28 @@ _OUTCOME_COUNTS = ("failure", "safe_contact", "stall", "timeout", "goal", "sut_e
 """Outcomes the run summary counts, each as ``<outcome>s``."""
 
 
-class RunFailed(Exception):  # noqa: N818 - names an outcome, as the command reports it
-    """A run could not write its results (a full disk, say); nothing of it was kept."""
+class RunFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
+    """A run could not write its results (a full disk, say), or tested nothing; nothing of it
+    was kept."""
+
+
+class NothingTested(RunFailed):
+    """So many of a run's episodes ended in ``sut_error`` (``sut_error_limit``) that it cannot
+    stand for a test of the system: its results are not kept, and the message names the first
+    error."""
+
+    def __init__(self, config: RunConfig, store: RunStore) -> None:
+        played, first = len(store.episodes), store.first_sut_error
+        if first is None:
+            message = "its tester played no episode, so it tested nothing"
+        else:
+            share = "every one" if store.sut_error_count == played else store.sut_error_count
+            message = (
+                f"{share} of its {played} episodes ended in a SUT error, so it tested nothing "
+                f"(sut_error_limit {config.sut_error_limit:g}); the first, episode "
+                f"{first['episode']}: {first['error']}"
+            )
+        super().__init__(f"run {config.run_id}: {message}; nothing of it was kept")
 
 
 def is_finished(directory: Path) -> bool:
@@ -279,8 +343,11 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
     Raises:
         ConfigError: ``out`` holds something else, or a run of another configuration, or
             another process is writing it.
-        RunFailed: The run could not write its results; nothing of it is left.
+        PluginError: A plug-in of the SUT fails on a trial episode (:func:`check_sut`).
+        RunFailed: The run could not write its results, or tested nothing (``NothingTested``);
+            nothing of it is left.
     """
+    check_sut(config)
     out.parent.mkdir(parents=True, exist_ok=True)
     with exclusive_lock(out.parent / f".{out.name}.lock", out, "run"):
         if out.exists():
@@ -328,7 +395,10 @@ def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, 
         TextColumn(f"{config.run_id}"),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("{task.fields[rate]:.1f} episodes/s, {task.fields[failures]} failures"),
+        TextColumn(
+            "{task.fields[rate]:.1f} episodes/s, {task.fields[failures]} failures"
+            "{task.fields[sut_errors]}"
+        ),
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
@@ -339,9 +409,18 @@ def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, 
         nonlocal task
         if task is None:  # the run has started: the bar stays off an error in its settings
             progress.start()
-            task = progress.add_task("run", total=config.episodes, rate=0.0, failures=0)
+            task = progress.add_task(
+                "run", total=config.episodes, rate=0.0, failures=0, sut_errors=""
+            )
         rate = state.episodes_done / state.elapsed_s if state.elapsed_s > 0 else 0.0
-        progress.update(task, completed=state.episodes_done, rate=rate, failures=state.failures)
+        sut_errors = f", [red]{state.sut_errors} SUT errors[/red]" if state.sut_errors else ""
+        progress.update(
+            task,
+            completed=state.episodes_done,
+            rate=rate,
+            failures=state.failures,
+            sut_errors=sut_errors,
+        )
 
     try:
         return execute_run_atomically(config, out, update)

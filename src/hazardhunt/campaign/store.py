@@ -35,6 +35,7 @@ from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
     TRAJECTORY_COLUMNS,
+    EpisodeSummary,
     TrajectorySample,
 )
 from hazardhunt.spec.failure_classes import FailureClassifier
@@ -181,6 +182,10 @@ class RunStore:
         self.loitering: list[dict[str, Any]] = []
         self.episodes: list[dict[str, Any]] = []
         self.failures: list[dict[str, Any]] = []
+        self.sut_error_count = 0
+        """Episodes stored so far that ended in ``sut_error``."""
+        self.first_sut_error: dict[str, Any] | None = None
+        """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
         self._parts = 0
@@ -193,6 +198,10 @@ class RunStore:
         row = {"episode": episode, **summary.as_row(), **dataclasses.asdict(result.timing)}
         row["loitering"] = self.loitering_rule.matches(summary)
         self.episodes.append(row)
+        if summary.outcome == "sut_error":
+            self.sut_error_count += 1
+            if self.first_sut_error is None:
+                self.first_sut_error = {"episode": episode, "error": sut_error_of(summary)}
         replay = {"episode": episode, **self.replay_keys}
         if row["loitering"]:
             self.loitering.append(
@@ -279,8 +288,8 @@ def left_out(directory: Path) -> list[str]:
 
 
 def campaign_totals(entries: list[dict[str, Any]]) -> dict[str, int]:
-    """A campaign summary's counts from its run entries: the runs by status, and the episodes
-    and failures of the complete ones."""
+    """A campaign summary's counts from its run entries: the runs by status, and the episodes,
+    failures and SUT errors of the complete ones."""
     complete = [e for e in entries if e["status"] == "complete"]
     return {
         "runs_total": len(entries),
@@ -289,6 +298,7 @@ def campaign_totals(entries: list[dict[str, Any]]) -> dict[str, int]:
         "runs_pending": sum(e["status"] == "pending" for e in entries),
         "episodes": sum(e["episodes"] for e in complete),
         "failures": sum(e["failures"] for e in complete),
+        "sut_errors": sum(e.get("sut_errors", 0) for e in complete),
     }
 
 
@@ -316,3 +326,13 @@ def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise
+
+
+def sut_error_of(summary: EpisodeSummary) -> str:
+    """What ended an episode as ``sut_error``, in one line: the first error of the controller or
+    of the safety layer, or the controller's failed commands in a row."""
+    if summary.controller_errors:
+        return f"controller: {summary.controller_errors[0]}"
+    if summary.safety_layer_errors:
+        return f"safety layer: {summary.safety_layer_errors[0]}"
+    return f"controller: {summary.controller_failures} failed commands (brake requests)"

@@ -8,9 +8,10 @@ one). Re-running a case plays the same actions against today's SUT (or one given
 compares:
 
 - ``still fails``: a failure of the same class;
-- ``changed``: a failure of another class, or the SUT erred (``sut_error``): it fails
-  differently;
-- ``fixed``: neither.
+- ``changed``: a failure of another class: it fails differently;
+- ``error``: the SUT erred (``sut_error``: raised, hung, returned something unusable), so the
+  case tested nothing: it is neither fixed nor failing, and ``regress`` exits with its own code;
+- ``fixed``: none of these.
 
 A case file is data: nothing it names is imported from it. A failure classifier plug-in that a
 case names must be named again (``regress --classifier``); a controller or safety-layer plug-in
@@ -38,6 +39,8 @@ from hazardhunt.campaign.config import EnvOptions
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
+from hazardhunt.campaign.store import sut_error_of
+from hazardhunt.errors import InputError
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.world.scenario import (
     ScenarioError,
@@ -53,10 +56,10 @@ else:  # pragma: no cover
 
 CASE_FORMAT = 1
 """Version of the case file layout."""
-VERDICTS = ("still fails", "changed", "fixed")
+VERDICTS = ("still fails", "changed", "error", "fixed")
 
 
-class CaseError(ValueError):
+class CaseError(InputError):
     """A case file that cannot be used; the message names the file and the key."""
 
 
@@ -144,6 +147,8 @@ class RegressionResult:
     sim_time: float
     verdict: str
     """One of ``VERDICTS``."""
+    error: str | None = None
+    """What the SUT raised, for the verdict ``error``."""
 
 
 def export_cases(
@@ -368,14 +373,17 @@ def regress_case(
         chosen = own_classifier or make_classifier(None, simulation.robot_params)
         failure_class = chosen.classify(result.trajectory or (), result.summary, simulation.field)
     expected = case.expected.failure_class
-    if failure_class == expected:
+    sut_error = None
+    if outcome == "sut_error":
+        verdict, sut_error = "error", sut_error_of(result.summary)
+    elif failure_class == expected:
         verdict = "still fails"
-    elif failure_class is not None or outcome == "sut_error":
+    elif failure_class is not None:
         verdict = "changed"
     else:
         verdict = "fixed"
     return RegressionResult(
-        path.name, expected, outcome, failure_class, result.summary.sim_time, verdict
+        path.name, expected, outcome, failure_class, result.summary.sim_time, verdict, sut_error
     )
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySample
 from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
 from hazardhunt.spec.risk import RiskParams, risk
@@ -689,7 +690,7 @@ class _EpisodeCounts:
         self.closest_robot_position, self.closest_human_velocity = robot_position, human_velocity
 
 
-class PeriodError(ValueError):
+class PeriodError(InputError):
     """Time settings of a simulation that cannot work together; the message names the setting,
     its value and what it must be."""
 

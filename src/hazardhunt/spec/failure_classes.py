@@ -67,11 +67,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
+from hazardhunt.sut.compat import mismatch, parameter_names, takes, warn_earlier
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.geometry import to_body_frame
@@ -220,3 +221,46 @@ def classify_failures(
         episode: chosen.classify(trajectory, summaries[episode], field)
         for episode, trajectory in trajectories.items()
     }
+
+
+class _ClassifierBefore020:
+    """A classifier as before 0.2.0: ``classes_for(field_diameter)`` and
+    ``classify(trajectory_rows, summary_row, field_diameter)``, the field as its front
+    diameter (m, None: no field) and the records as plain rows (dicts)."""
+
+    def __init__(self, classifier: Any) -> None:
+        self.classifier = classifier
+
+    @property
+    def name(self) -> str:
+        return str(self.classifier.name)
+
+    def classes_for(self, field: FieldShape) -> tuple[str, ...]:
+        return tuple(self.classifier.classes_for(field.diameter))
+
+    def classify(
+        self, trajectory: Sequence[TrajectorySample], summary: EpisodeSummary, field: FieldShape
+    ) -> str:
+        rows = [sample.as_row() for sample in trajectory]
+        return cast(str, self.classifier.classify(rows, summary.as_row(), field.diameter))
+
+
+def adapt_classifier(path: str, classifier: FailureClassifier) -> FailureClassifier:
+    """``classifier`` as hazardhunt calls it: itself, or wrapped if it implements the protocol
+    before 0.2.0 (its methods take a ``field_diameter``; see :mod:`hazardhunt.sut.compat`).
+
+    Raises:
+        PluginError: ``classes_for`` or ``classify`` takes parameters of no version of the
+            protocol.
+    """
+    if not takes(classifier.classes_for, 1):
+        raise mismatch(path, "classes_for", classifier.classes_for, "(field)")
+    if not takes(classifier.classify, 3):
+        raise mismatch(path, "classify", classifier.classify, "(trajectory, summary, field)")
+    earlier = "field_diameter" in parameter_names(classifier.classes_for)
+    if not earlier:
+        return classifier
+    warn_earlier(
+        path, "failure classifier", "classes_for", "(field_diameter)", "(field: FieldShape)"
+    )
+    return _ClassifierBefore020(classifier)

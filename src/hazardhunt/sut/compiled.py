@@ -28,6 +28,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.errors import HazardhuntError
+
 FloatArray = NDArray[np.float64]
 
 COMPILER_FLAGS = ("-O1", "-fPIC", "-shared")
@@ -58,7 +60,7 @@ CASADI_SYMBOL_EXPORT int hazardhunt_solve(const casadi_real* x0, const casadi_re
 """
 
 
-class CompileError(RuntimeError):
+class CompileError(HazardhuntError, RuntimeError):
     """The solver could not be generated, compiled or loaded."""
 
 

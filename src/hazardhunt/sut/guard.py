@@ -27,16 +27,17 @@ from typing import Any, TypeGuard, TypeVar
 
 import numpy as np
 
+from hazardhunt.errors import HazardhuntError
 from hazardhunt.sut.protocols import ControlCommand, SafetyStatus
 
 T = TypeVar("T")
 
 
-class UnusableReturnError(ValueError):
+class UnusableReturnError(HazardhuntError, ValueError):
     """A plug-in returned something its protocol does not allow."""
 
 
-class TimeLimitError(Exception):
+class TimeLimitError(HazardhuntError):
     """A plug-in's call ran longer than its time limit."""
 
 

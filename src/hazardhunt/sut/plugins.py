@@ -19,15 +19,18 @@ import inspect
 import math
 import pkgutil
 import sys
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+from hazardhunt.errors import PluginError as PluginError
+from hazardhunt.sut.compat import ProtocolWarning, adapt_controller, adapt_safety_layer
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 
-
-class PluginError(ValueError):
-    """A plug-in that cannot be loaded or does not fit its protocol."""
+MOVED_MODULES = {"hazardhunt.sut.conservative": "hazardhunt.benchmark.conservative"}
+"""Built-in plug-in modules that moved, by their earlier name: a path naming the earlier one
+still loads, with a warning."""
 
 
 def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
@@ -43,6 +46,14 @@ def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
     module_name, separator, attribute = path.partition(":")
     if not separator or not module_name or not attribute:
         raise PluginError(f"{path!r} is not an import path of the form 'package.module:Name'")
+    if module_name in MOVED_MODULES:
+        moved = f"{MOVED_MODULES[module_name]}:{attribute}"
+        warnings.warn(
+            f"{path!r} has moved to {moved!r} (CHANGELOG.md); loading it from there",
+            ProtocolWarning,
+            stacklevel=2,
+        )
+        module_name, path = MOVED_MODULES[module_name], moved
     with _importable_from(search_path):
         try:
             return pkgutil.resolve_name(path)
@@ -153,8 +164,10 @@ def protocol_members(protocol: type) -> dict[str, bool]:
 def build_controller(
     path: str, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
 ) -> Controller:
-    """A user's controller (see :func:`build`), whose ``control_period`` is a positive number."""
+    """A user's controller (see :func:`build`), whose ``control_period`` is a positive number;
+    one written for an earlier protocol is adapted (:mod:`hazardhunt.sut.compat`)."""
     controller: Controller = build("controller", path, params or {}, Controller, search_path)
+    controller = adapt_controller(path, controller)
     period = controller.control_period
     if (
         isinstance(period, bool)
@@ -170,6 +183,7 @@ def build_controller(
 def build_safety_layer(
     path: str, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
 ) -> SafetyLayer:
-    """A user's safety layer (see :func:`build`)."""
+    """A user's safety layer (see :func:`build`); one written for an earlier protocol is adapted
+    (:mod:`hazardhunt.sut.compat`)."""
     layer: SafetyLayer = build("safety layer", path, params or {}, SafetyLayer, search_path)
-    return layer
+    return adapt_safety_layer(path, layer)

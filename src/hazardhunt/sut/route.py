@@ -16,12 +16,13 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
+from hazardhunt.errors import InputError
 from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import FloatArray
 from hazardhunt.world.scenario import Scenario
 
 
-class RoutePlanningError(ValueError):
+class RoutePlanningError(InputError):
     """No collision-free route exists between two route points."""
 
     def __init__(self, message: str, stops: tuple[int, ...] = ()) -> None:

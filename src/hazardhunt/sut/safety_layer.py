@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
+from hazardhunt.errors import InputError
 from hazardhunt.sut.protocols import FloatArray, SafetyStatus
 from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.geometry import (
@@ -28,7 +29,7 @@ from hazardhunt.world.geometry import (
 from hazardhunt.world.scenario import Scenario
 
 
-class FieldShapeError(ValueError):
+class FieldShapeError(InputError):
     """A field shape's value out of its range; ``key`` names it."""
 
     def __init__(self, key: str, problem: str) -> None:

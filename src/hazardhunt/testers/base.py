@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import Action, EpisodeResult, Policy, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
@@ -20,7 +21,7 @@ from hazardhunt.testers.evaluator import EpisodeEvaluator, Plan
 from hazardhunt.testers.spaces import DECISION_KINDS, DecisionSpace
 
 
-class TesterParameterError(ValueError):
+class TesterParameterError(InputError):
     """A tester parameter the tester does not take, or a value it cannot use; ``key`` names the
     parameter and ``problem`` says what is wrong with it."""
 

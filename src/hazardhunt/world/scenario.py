@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
+from hazardhunt.errors import InputError
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
 
@@ -32,7 +33,7 @@ else:  # pragma: no cover
 BUILTIN_SCENARIOS = ("crossing", "head-on", "overtaking")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError):
     """A scenario or map file that cannot be used; the message names the file and the field."""
 
 

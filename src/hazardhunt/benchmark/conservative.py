@@ -9,7 +9,7 @@ and should find the failure each mutant hides. Each mutant is a subclass that ch
 narrow thing, the way a real bug would, and names in its docstring the human behaviour that
 exposes it. All of them are plug-ins like a user's controller::
 
-    hazardhunt run --controller hazardhunt.sut.conservative:StaleTrack ...
+    hazardhunt run --controller hazardhunt.benchmark.conservative:StaleTrack ...
 """
 
 from __future__ import annotations

@@ -9,9 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from hazardhunt.sim.simulation import Simulation
-from hazardhunt.sut import conservative
-from hazardhunt.sut.conservative import (
+from hazardhunt.benchmark import conservative
+from hazardhunt.benchmark.conservative import (
     MUTANTS,
     BlindAfterRestart,
     BlindRightRear,
@@ -22,6 +21,7 @@ from hazardhunt.sut.conservative import (
     StandingHumanInLaneOnly,
     StopDistanceConvertedTwice,
 )
+from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
 from hazardhunt.sut.protocols import RobotState, TrackedHuman
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
@@ -185,7 +185,7 @@ TOUCHING_ATTACKS = [
 # ------------------------------------------------------------------ tests
 @pytest.mark.parametrize("name", ["ConservativeController", *(m.__name__ for m in MUTANTS)])
 def test_every_controller_loads_as_a_plugin(name):
-    controller = build_controller(f"hazardhunt.sut.conservative:{name}", {})
+    controller = build_controller(f"hazardhunt.benchmark.conservative:{name}", {})
     assert type(controller) is getattr(conservative, name)
     assert controller.control_period == pytest.approx(0.2)
 
