@@ -17,8 +17,8 @@ import pandas as pd
 import pytest
 
 from hazardhunt.campaign import config as config_module
-from hazardhunt.campaign.campaign import shown_scenario
 from hazardhunt.campaign.config import load_campaign
+from hazardhunt.campaign.progress import shown_scenario
 from hazardhunt.world.scenario import Scenario, load_scenario
 from tests.helpers import hazardhunt, run_tables
 

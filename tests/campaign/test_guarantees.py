@@ -23,7 +23,7 @@ import pytest
 from hazardhunt.analysis import report
 from hazardhunt.analysis.report import write_report
 from hazardhunt.analysis.results import damaged_runs
-from hazardhunt.campaign import campaign as campaign_module
+from hazardhunt.campaign import ledger as ledger_module
 from hazardhunt.campaign.campaign import CampaignFailed, run_campaign
 from hazardhunt.campaign.config import load_campaign
 from hazardhunt.campaign.run import is_complete
@@ -330,14 +330,14 @@ def test_a_campaign_whose_summary_cannot_be_written_finishes_its_runs_and_says_s
 ) -> None:
     config = load_campaign(campaign_file(plugins, {"random": ""}))
     out = tmp_path / "campaign"
-    written = campaign_module.write_json_atomic
+    written = ledger_module.write_json_atomic
 
     def full_for_the_ledger(path: Path, data: object) -> None:
         if path.name == "summary.json":
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         written(path, data)
 
-    monkeypatch.setattr(campaign_module, "write_json_atomic", full_for_the_ledger)
+    monkeypatch.setattr(ledger_module, "write_json_atomic", full_for_the_ledger)
     with pytest.raises(CampaignFailed, match=r"summary\.json: could not be written"):
         run_campaign(config, out)
     assert is_complete(out / "runs" / "head-on__2m__random__seed0")

@@ -1,0 +1,127 @@
+"""A campaign's ledger: how every run of the grid stands, kept in the campaign's
+``summary.json`` and rewritten after each change, and how one run ended (:class:`RunOutcome`),
+as the executors report it."""
+
+from __future__ import annotations
+
+import json
+import traceback
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
+from hazardhunt.campaign.run import is_finished
+from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """How one run of a campaign ended: its summary, or the error it raised."""
+
+    config: RunConfig
+    summary: dict[str, Any] | None
+    error: str | None = None
+    """``Type: message`` of the exception, when the run raised."""
+    traceback: str | None = None
+    ray_node: str | None = None
+    """The id of the Ray node that executed the run (the ``ray`` executor only)."""
+
+
+def failed(run: RunConfig, error: BaseException) -> RunOutcome:
+    """The outcome of a run that raised ``error``."""
+    return RunOutcome(
+        run,
+        None,
+        f"{type(error).__name__}: {error}",
+        "".join(traceback.format_exception(error)),
+    )
+
+
+class Ledger:
+    """The campaign's ``summary.json``: how every run stands, rewritten after each change.
+
+    Complete runs are read back from their own directories, so the ledger of a resumed campaign
+    is right even if the previous campaign process died between a run and its ledger update. A
+    finished run whose files do not match its checksums is ``damaged`` and pending.
+    """
+
+    def __init__(self, config: CampaignConfig, runs: list[RunConfig], out: Path) -> None:
+        self.config = config
+        self.path = out / "summary.json"
+        self.entries: dict[str, dict[str, Any]] = {}
+        self.damaged: dict[str, str] = {}
+        """Run id -> what is wrong with its files."""
+        self.write_error: OSError | None = None
+        """Why the last write of ``summary.json`` failed; None once one succeeded."""
+        for run in runs:
+            directory = out / "runs" / run.run_id
+            if is_finished(directory):
+                damage = find_damage(directory)
+                if damage is None:
+                    stored = json.loads((directory / "summary.json").read_text())
+                    self.entries[run.run_id] = {"status": "complete"} | _ledger_entry(stored)
+                    continue
+                self.damaged[run.run_id] = damage
+            elif directory.exists():
+                raise ConfigError(f"{directory}: not a complete run; delete it to redo the run")
+            self.entries[run.run_id] = {"status": "pending"} | _run_keys(run)
+        self.write()
+
+    def status(self, run: RunConfig) -> str:
+        """``complete``, ``failed`` or ``pending``."""
+        return str(self.entries[run.run_id]["status"])
+
+    def record(self, outcome: RunOutcome) -> None:
+        """Store how a run ended and rewrite ``summary.json``."""
+        run = outcome.config
+        if outcome.summary is not None:
+            entry = {"status": "complete"} | _ledger_entry(outcome.summary)
+            if outcome.ray_node is not None:
+                entry["ray_node"] = outcome.ray_node
+        else:
+            failure = {"error": outcome.error, "traceback": outcome.traceback}
+            entry = {"status": "failed"} | _run_keys(run) | failure
+        self.entries[run.run_id] = entry
+        self.write()
+
+    def summary(self) -> dict[str, Any]:
+        """The campaign summary: totals, then one entry per run in grid order."""
+        entries = list(self.entries.values())
+        return {
+            "campaign": self.config.model_dump(mode="json"),
+            **campaign_totals(entries),
+            "updated_at": datetime.now(timezone.utc).isoformat(),
+            "runs": entries,
+        }
+
+    def write(self) -> dict[str, Any]:
+        """Rewrite ``summary.json`` atomically; the summary meant to be written.
+
+        A write that fails (a full disk) is remembered in ``write_error`` rather than raised:
+        the runs go on, and the next write tries again.
+        """
+        summary = self.summary()
+        try:
+            write_json_atomic(self.path, summary)
+        except OSError as error:
+            self.write_error = error
+        else:
+            self.write_error = None
+        return summary
+
+
+def _ledger_entry(summary: dict[str, Any]) -> dict[str, Any]:
+    """A run's summary as the ledger keeps it: without the checksums of its files."""
+    return {key: value for key, value in summary.items() if key != "checksums"}
+
+
+def _run_keys(run: RunConfig) -> dict[str, Any]:
+    return {
+        "run_id": run.run_id,
+        "scenario": run.scenario,
+        "field": run.field,
+        "tester": run.tester,
+        "seed": run.seed,
+    }

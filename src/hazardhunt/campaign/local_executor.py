@@ -1,0 +1,247 @@
+"""The local executor: a campaign's runs in spawned worker processes on this machine, which die
+with the campaign process; a worker that dies takes only its own run with it."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing
+import multiprocessing.connection
+import os
+import shutil
+import signal
+import sys
+import time
+from collections import deque
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from multiprocessing.context import SpawnContext, SpawnProcess
+from pathlib import Path
+from typing import Any
+
+from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.ledger import RunOutcome, failed
+from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial_directory
+from hazardhunt.errors import HazardhuntError
+
+PROGRESS_INTERVAL_S = 0.5
+"""Least time between two progress reports of a run to the campaign process, in s."""
+
+WORKER_DEATH_RETRIES = 2
+"""Times a run is started again, in a new worker process, after the process executing it died
+(killed by a signal, say the out-of-memory killer's SIGKILL) before it is recorded as failed."""
+
+_PR_SET_PDEATHSIG = 1
+
+
+class WorkerDied(HazardhuntError, RuntimeError):  # noqa: N818 - names an outcome, as summary.json reports it
+    """The process executing a run ended without finishing it, every time it was tried."""
+
+
+OnEpisodes = Callable[[str, int], None]
+"""Called with a run id and its episodes done so far."""
+OnOutcome = Callable[[RunOutcome], None]
+OnRetry = Callable[[RunConfig, str, int], None]
+"""Called with a run whose worker died, how it died, and the attempt about to start."""
+
+
+def execute_locally(
+    runs: list[RunConfig],
+    runs_directory: Path,
+    workers: int,
+    on_episodes: OnEpisodes,
+    on_outcome: OnOutcome,
+    on_retry: OnRetry,
+) -> None:
+    """Execute ``runs`` in up to ``workers`` spawned worker processes that die with this one.
+
+    A worker that dies takes only its own run with it: a new worker takes its place, and the
+    run is started again up to ``WORKER_DEATH_RETRIES`` times before it is recorded as failed
+    with how its worker died.
+    """
+    context = multiprocessing.get_context("spawn")
+    queue = deque(runs)
+    deaths: dict[str, int] = {}
+    pool: list[_Worker] = []
+    try:
+        while queue or pool:
+            pool = _assign(pool, queue, workers, context, runs_directory)
+            handles = [w.connection for w in pool] + [w.process.sentinel for w in pool]
+            ready = multiprocessing.connection.wait(handles, PROGRESS_INTERVAL_S)
+            for worker in [w for w in pool if {w.connection, w.process.sentinel} & set(ready)]:
+                outcome = worker.receive(on_episodes)
+                if outcome is not None:
+                    on_outcome(outcome)
+                if not worker.alive:
+                    pool.remove(worker)
+                    _worker_died(worker, runs_directory, queue, deaths, on_outcome, on_retry)
+    except BaseException:
+        # Without this, leaving (Ctrl-C) would wait for every run in flight to finish.
+        for worker in pool:
+            worker.process.kill()
+        raise
+
+
+def _assign(
+    pool: list[_Worker],
+    queue: deque[RunConfig],
+    workers: int,
+    context: SpawnContext,
+    runs_directory: Path,
+) -> list[_Worker]:
+    """The pool once every idle worker has a queued run, new workers (up to ``workers``) have
+    the others, and the workers left idle are stopped."""
+    kept = []
+    for worker in pool:
+        if worker.run is None:
+            if not queue:
+                worker.stop()
+                continue
+            worker.assign(queue.popleft())
+        kept.append(worker)
+    while queue and len(kept) < workers:
+        worker = _Worker.start(context, runs_directory)
+        worker.assign(queue.popleft())
+        kept.append(worker)
+    return kept
+
+
+def _worker_died(
+    worker: _Worker,
+    runs_directory: Path,
+    queue: deque[RunConfig],
+    deaths: dict[str, int],
+    on_outcome: OnOutcome,
+    on_retry: OnRetry,
+) -> None:
+    """Queue the run of a dead worker again, or record it as failed after too many deaths;
+    either way, remove what it left of the run."""
+    run, how = worker.run, worker.death()
+    if run is None:
+        return
+    shutil.rmtree(partial_directory(runs_directory / run.run_id), ignore_errors=True)
+    deaths[run.run_id] = attempts = deaths.get(run.run_id, 0) + 1
+    if attempts <= WORKER_DEATH_RETRIES:
+        on_retry(run, how, attempts + 1)
+        queue.appendleft(run)
+    else:
+        error = WorkerDied(f"its worker process {how}, on each of {attempts} attempts")
+        on_outcome(failed(run, error))
+
+
+class _Worker:
+    """A worker process of the local executor: executes the runs it is sent, one at a time,
+    and sends back progress reports and each run's outcome over its own pipe (so that a
+    worker killed mid-message disturbs no other)."""
+
+    def __init__(self, process: SpawnProcess, connection: Connection) -> None:
+        self.process = process
+        self.connection = connection
+        self.run: RunConfig | None = None
+        """The run it executes; None while idle."""
+        self.alive = True
+        """False once its process has ended."""
+
+    @classmethod
+    def start(cls, context: SpawnContext, runs_directory: Path) -> _Worker:
+        """A new worker process."""
+        connection, worker_end = context.Pipe()
+        process = context.Process(
+            target=_serve, args=(worker_end, os.getpid(), runs_directory), name="hazardhunt-run"
+        )
+        process.start()
+        worker_end.close()  # so that the worker's death reads as the end of the pipe
+        return cls(process, connection)
+
+    def assign(self, run: RunConfig) -> None:
+        """Send it ``run`` to execute."""
+        self.run = run
+        with contextlib.suppress(OSError):  # a worker that died is found so by ``receive``
+            self.connection.send(run)
+
+    def receive(self, on_episodes: OnEpisodes) -> RunOutcome | None:
+        """Read what the worker sent: progress reports, and its run's outcome once it ended;
+        ``alive`` turns False if its process has ended."""
+        outcome = None
+        try:
+            while self.connection.poll():
+                message = self.connection.recv()
+                if isinstance(message, RunOutcome):
+                    outcome, self.run = message, None
+                else:
+                    on_episodes(*message)
+        except (EOFError, OSError):
+            self.alive = False
+        if not self.process.is_alive():
+            self.alive = False
+        return outcome
+
+    def death(self) -> str:
+        """How its process ended, once it has: "was killed by SIGKILL", "exited with code 1"."""
+        self.process.join()
+        code = self.process.exitcode or 0
+        if code < 0:
+            return f"was killed by {signal.Signals(-code).name}"
+        return f"exited with code {code}"
+
+    def stop(self) -> None:
+        """Tell the idle worker to exit, and wait until it has."""
+        with contextlib.suppress(OSError):
+            self.connection.send(None)
+        self.process.join(timeout=30)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.connection.close()
+
+
+def _serve(connection: Connection, campaign_pid: int, runs_directory: Path) -> None:
+    """A worker process: execute each run the campaign process sends until it sends None."""
+    _initialize_worker(campaign_pid)
+    while True:
+        try:
+            run = connection.recv()
+        except EOFError:  # the campaign process is gone
+            return
+        if run is None:
+            return
+        try:
+            outcome = RunOutcome(run, _run_in_worker(run, runs_directory, connection))
+        except Exception as error:
+            outcome = failed(run, error)
+        connection.send(outcome)
+
+
+def _initialize_worker(campaign_pid: int) -> None:
+    """Tie the worker's life to the campaign process, so that no orphan goes on writing."""
+    if sys.platform == "linux":
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL) != 0:
+            errno = ctypes.get_errno()
+            raise OSError(errno, f"prctl(PR_SET_PDEATHSIG): {os.strerror(errno)}")
+    if os.getppid() != campaign_pid:  # the campaign died before prctl took effect
+        os._exit(1)
+    # Ctrl-C is the campaign process's to handle: it kills the workers.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> dict[str, Any]:
+    """Execute ``run`` into its partial directory and rename it into place once complete,
+    reporting its progress over ``connection``."""
+    reporter = _progress_reporter(run.run_id, connection)
+    return execute_run_atomically(run, runs_directory / run.run_id, reporter)
+
+
+def _progress_reporter(run_id: str, connection: Connection) -> Callable[[RunProgress], None]:
+    """Sends a run's episodes done to the campaign process, at most every
+    ``PROGRESS_INTERVAL_S``."""
+    last_report = 0.0
+
+    def report(state: RunProgress) -> None:
+        nonlocal last_report
+        now = time.monotonic()
+        if now - last_report >= PROGRESS_INTERVAL_S:
+            last_report = now
+            connection.send((run_id, state.episodes_done))
+
+    return report
