@@ -16,7 +16,6 @@ or safety layer is a plug-in are drawn from their stored trajectories instead of
 from __future__ import annotations
 
 import base64
-import fcntl
 import html
 import json
 import os
@@ -33,7 +32,8 @@ import hazardhunt
 from hazardhunt.analysis import diversity, figures, tables, verdict
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
-from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.config import RunConfig, file_name
+from hazardhunt.campaign.lock import process_running, waiting_lock
 from hazardhunt.campaign.replay import (
     load_run_config,
     names_sut_plugins,
@@ -190,8 +190,7 @@ def _put_in_place(written: Path, final: Path) -> None:
     """Replace the report ``final`` (if any) by the complete one ``written``. Two reports of
     one directory finishing at once take turns (a lock beside ``final``): the last one stays."""
     previous = written.with_suffix(".previous")
-    with open(final.with_name(".report.lock"), "a") as lock:
-        fcntl.flock(lock.fileno(), fcntl.LOCK_EX)
+    with waiting_lock(final.with_name(".report.lock")):
         if final.exists():
             final.rename(previous)
         written.rename(final)
@@ -202,18 +201,8 @@ def _remove_leftovers(directory: Path) -> None:
     """Remove what reports that were killed left behind (not those of a report still running)."""
     for leftover in directory.glob(".report-*.*"):
         pid = leftover.name.removeprefix(".report-").partition(".")[0]
-        if pid.isdigit() and not _running(int(pid)):
+        if pid.isdigit() and not process_running(int(pid)):
             shutil.rmtree(leftover, ignore_errors=True)
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass  # another user's process
-    return True
 
 
 # ------------------------------------------------------------------ sections
@@ -341,7 +330,7 @@ def _archives(report: _Report, results: Results) -> None:
     )
     for run_id, path in archives:
         picture = figures.archive_heat_map(
-            pd.read_parquet(path), report.figures / f"archive_{_file_name(run_id)}.png", run_id
+            pd.read_parquet(path), report.figures / f"archive_{file_name(run_id)}.png", run_id
         )
         report.image(section, picture, f"The archive of {run_id}")
 
@@ -470,7 +459,7 @@ def _learning_and_places(report: _Report, results: Results) -> None:
         return
     for scenario in sorted(results.runs["scenario"].unique()):
         chosen = failures[failures["scenario"] == scenario]
-        name = _file_name(f"heat_map_{scenario}")
+        name = file_name(f"heat_map_{scenario}")
         path = figures.failure_heat_map(chosen, scenario, report.figures / f"{name}.png")
         report.image(places, path, f"Failures on the floor: {scenario}")
 
@@ -519,7 +508,7 @@ def _failure_pictures(
             return "not replayed (plug-in SUT) nor drawn (a copy without trajectories)"
         field = results.field_shape(str(row["field"]), str(row["scenario"]))
         picture = _recorded_picture(
-            report.figures / f"{_file_name(stem)}.png", directory, config, field, row, title
+            report.figures / f"{file_name(stem)}.png", directory, config, field, row, title
         )
         report.image(section, picture, f"{title} (as recorded)")
         return "not replayed (plug-in SUT)"
@@ -538,7 +527,7 @@ def _replayed_pictures(
     """Re-simulate a failure of a run with the built-in SUT, draw it and its last seconds;
     whether it reproduced."""
     replay = replay_failure(directory, episode)
-    stem = _file_name(stem)
+    stem = file_name(stem)
     simulation = replay.simulation
     picture = plot_episode(
         report.figures / f"{stem}.png",
@@ -827,7 +816,3 @@ def markdown_table(table: pd.DataFrame) -> str:
 
 def _number(value: float) -> str:
     return "" if pd.isna(value) else f"{value:.4g}"
-
-
-def _file_name(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)

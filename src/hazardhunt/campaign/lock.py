@@ -1,4 +1,7 @@
-"""The lock that keeps two processes from writing one run or campaign directory."""
+"""Locks between hazardhunt processes, all ``flock``s that the kernel drops when their process
+dies: the one that keeps two processes from writing one run or campaign directory, the one under
+which two reports of a directory take turns, and whether a process named in a leftover file
+still runs."""
 
 from __future__ import annotations
 
@@ -37,3 +40,23 @@ def exclusive_lock(lock_file: Path, guarded: Path, holder: str) -> Iterator[None
         handle.write(f"{os.getpid()}\n")
         handle.flush()
         yield
+
+
+@contextmanager
+def waiting_lock(lock_file: Path) -> Iterator[None]:
+    """Hold ``lock_file`` (``flock``, created if absent), waiting while another process holds
+    it: for short steps that may take turns (two reports putting their pages in place)."""
+    with open(lock_file, "a") as handle:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        yield
+
+
+def process_running(pid: int) -> bool:
+    """Whether process ``pid`` runs (another user's counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass  # another user's process
+    return True
