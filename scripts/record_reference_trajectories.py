@@ -46,7 +46,9 @@ def episode(
 ) -> np.ndarray:
     """The trajectory of one episode driven by ``actions`` (the first ones until it ends), by
     ``controller`` or else the default NMPC."""
-    simulation = Simulation.build(scenario, field, decision_period, controller=controller)
+    simulation = Simulation.build(
+        scenario, field, decision_period=decision_period, controller=controller
+    )
     rows = simulation.simulate(np.asarray(actions, dtype=np.float32)).trajectory or ()
     return np.array([[getattr(row, c) for c in COLUMNS] for row in rows], dtype=np.float64)
 

@@ -198,6 +198,13 @@ TesterParamOption = Annotated[
         "repeat for several."
     ),
 ]
+RobotOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="A robot parameter as KEY=VALUE (length, width, max_speed, max_acceleration, ...: "
+        "docs/environment.md); repeatable."
+    ),
+]
 SutErrorLimitOption = Annotated[
     float,
     typer.Option(
@@ -208,7 +215,13 @@ SutErrorLimitOption = Annotated[
 ]
 
 
-@app.command("run")
+@app.command(
+    "run",
+    help="Run one tester on one scenario and field setting for a budget of episodes.\n\n"
+    "Exits with code 1 when the run tested nothing (every episode, or --sut-error-limit of "
+    "them, ended in a SUT error) or could not write its results; 2 for bad input, before "
+    "anything is written (a plug-in that fails on a trial episode included).",
+)
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
@@ -221,6 +234,13 @@ def run_command(
     decision_period: Annotated[float, typer.Option(help="Seconds per human action.")] = 2.0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
     controller_timeout: ControllerTimeoutOption = None,
+    episode_duration: Annotated[
+        float, typer.Option(help="Simulated seconds after which an episode times out.")
+    ] = 30.0,
+    stall_duration: Annotated[
+        float, typer.Option(help="Seconds of emergency stop in a row that end an episode.")
+    ] = 10.0,
+    robot: RobotOption = None,
     tester_param: TesterParamOption = None,
     controller: ControllerOption = None,
     controller_param: ControllerParamOption = None,
@@ -233,12 +253,8 @@ def run_command(
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
 ) -> None:
-    """Run one tester on one scenario and field setting for a budget of episodes.
-
-    Exits with code 1 when the run tested nothing (every episode, or --sut-error-limit of
-    them, ended in a SUT error) or could not write its results; 2 for bad input, before
-    anything is written (a plug-in that fails on a trial episode included).
-    """
+    """The command; long because its signature is the command's options, one per field of a run's
+    configuration (``RunConfig``, ``EnvOptions``)."""
     from hazardhunt.campaign.config import (
         EnvOptions,
         RunConfig,
@@ -258,7 +274,10 @@ def run_command(
             env=EnvOptions(
                 decision_period=decision_period,
                 solver=solver,
+                episode_duration=episode_duration,
+                stall_duration=stall_duration,
                 controller_timeout=controller_timeout,
+                robot=_assignments("--robot", robot),
             ),
             tester_params={} if tester_plugin else _assignments("--tester-param", tester_param),
             controller=_plugin("--controller", controller, controller_param),

@@ -15,7 +15,7 @@ OUTCOMES = {"goal", "failure", "safe_contact", "timeout", "stall", "sut_error"}
 @pytest.mark.parametrize("field", list(FIELD_SETTINGS))
 @pytest.mark.parametrize("scenario", BUILTIN_SCENARIOS)
 def test_random_humans_never_break_the_simulation(scenario, field):
-    sim = Simulation.build(scenario, field, 0.4, controller=NMPCController())
+    sim = Simulation.build(scenario, field, decision_period=0.4, controller=NMPCController())
     rng = np.random.default_rng(42)
     floor, robot = sim.scenario.floor, sim.robot_params
     for _ in range(6):

@@ -368,7 +368,7 @@ def with_response_time(seconds):
     """The crossing with a 1.25 m field whose brake engages ``seconds`` after a violation."""
     fields = {"slow": {"diameter": 1.25, "response_time": seconds}}
     return Simulation.build(
-        dataclasses.replace(CROSSING, fields=fields), "slow", 0.2, controller=NMPC
+        dataclasses.replace(CROSSING, fields=fields), "slow", decision_period=0.2, controller=NMPC
     )
 
 

@@ -21,7 +21,7 @@ def test_a_recorded_human_reaches_the_class(name):
     simulation = Simulation.build(
         example["scenario"],
         example["field"],
-        example["decision_period"],
+        decision_period=example["decision_period"],
         controller=NMPC,
     )
     result = simulation.simulate(np.asarray(example["actions"], dtype=np.float32))

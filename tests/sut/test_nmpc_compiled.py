@@ -22,7 +22,10 @@ RECORDED = json.loads((Path(__file__).parents[1] / "spec" / "recorded_failures.j
 def replay(example: dict, controller: NMPCController) -> pd.DataFrame:
     """The recorded episode's trajectory, without the solve times measured on the clock."""
     simulation = Simulation.build(
-        example["scenario"], example["field"], example["decision_period"], controller=controller
+        example["scenario"],
+        example["field"],
+        decision_period=example["decision_period"],
+        controller=controller,
     )
     result = simulation.simulate(np.asarray(example["actions"], dtype=np.float32))
     rows = [dataclasses.asdict(sample) for sample in result.trajectory]

@@ -33,7 +33,8 @@ from hazardhunt.campaign.plugins import (
     make_safety_layer,
 )
 from hazardhunt.errors import InputError
-from hazardhunt.sim.simulation import decisions_in, whole_multiple
+from hazardhunt.sim.simulation import SimulationSettings, decisions_in, whole_multiple
+from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
@@ -93,6 +94,16 @@ class EnvOptions(_Strict):
     robot: RobotParams = RobotParams()
     """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
     controller receives them in ``reset``."""
+
+    def settings(self) -> SimulationSettings:
+        """These options as the simulation's settings (the others at their defaults)."""
+        return SimulationSettings(
+            decision_period=self.decision_period,
+            termination=TerminationParams(self.episode_duration, self.stall_duration),
+            controller_timeout=self.controller_timeout,
+            solver=self.solver,
+            robot=self.robot,
+        )
 
     @model_validator(mode="after")
     def _decision_fits_episode(self) -> EnvOptions:

@@ -51,7 +51,6 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError, PluginError
 from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
-from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
@@ -92,13 +91,9 @@ def build_simulation(
         return Simulation.build(
             scenario,
             field,
-            options.decision_period,
-            solver=options.solver,
+            options.settings(),
             controller=None if controller is None else make_controller(controller),
             safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
-            termination=TerminationParams(options.episode_duration, options.stall_duration),
-            controller_timeout=options.controller_timeout,
-            robot=options.robot,
         )
     except PeriodError as error:
         raise ConfigError(str(error)) from None

@@ -14,14 +14,10 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from hazardhunt.env.observation import OBSERVATION_FEATURES, encode_observation
-from hazardhunt.sim.simulation import DecisionReport, Simulation
+from hazardhunt.sim.simulation import DecisionReport, Simulation, SimulationSettings
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.spec.outcomes import TerminationParams
 from hazardhunt.spec.rewards import REWARD_KINDS, RewardKind, decision_reward
-from hazardhunt.spec.risk import RiskParams
-from hazardhunt.spec.safety import SafetySpecParams
 from hazardhunt.sut.protocols import Controller, SafetyLayer
-from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.scenario import Scenario
 
 ObsType = NDArray[np.float32]
@@ -66,22 +62,14 @@ class AGVEnv(gym.Env[ObsType, ActType]):
         scenario: str | Scenario = "crossing",
         field: str = "1.25m",
         reward: RewardKind = "max",
-        decision_period: float = 2.0,
+        settings: SimulationSettings | float = SimulationSettings(),
         *,
-        solver: str = "fatrop",
         controller: Controller | None = None,
         safety_layer: SafetyLayer | None = None,
-        physics_step: float = 0.05,
-        termination: TerminationParams = TerminationParams(),
-        max_failed_commands: int = 5,
-        controller_timeout: float | None = None,
-        robot: RobotParams = RobotParams(),
-        human: HumanParams = HumanParams(),
-        risk_params: RiskParams = RiskParams(),
-        safety_spec: SafetySpecParams = SafetySpecParams(),
         render_mode: str | None = None,
+        **changes: Any,
     ) -> None:
-        """Build the environment (see :meth:`Simulation.build` for the simulation's arguments).
+        """Build the environment (see :meth:`Simulation.build`).
 
         Args:
             scenario: A built-in scenario name (``crossing``, ``head-on``, ``overtaking``), a
@@ -89,39 +77,23 @@ class AGVEnv(gym.Env[ObsType, ActType]):
             field: Protective-field setting: ``none``, ``1.25m``, ``2m`` or a field the
                 scenario defines.
             reward: ``acc`` (accumulated risk) or ``max`` (episode's maximum risk at the end).
-            decision_period: Time the human holds each action, in s; a multiple of the
-                controller's period.
-            solver: NMPC solver, ``fatrop`` or ``ipopt`` (ignored with ``controller``).
+            settings: The simulation's settings (periods, limits, the robot's and human's
+                parameters, the NMPC's solver; defaults from SPEC). A number: the decision
+                period, as the fourth argument was before 0.2.0, with a warning.
             controller: The robot's controller; the CasADi NMPC when None.
             safety_layer: The safety layer; the laser field of ``field`` when None.
-            physics_step: Physics time step, in s.
-            termination: Episode duration and stall limit.
-            max_failed_commands: Consecutive failed controller commands that end the episode
-                as ``sut_error``.
-            controller_timeout: Wall-clock limit on each call of the controller and of the
-                safety layer, in s; a call that exceeds it ends the episode as ``sut_error``.
-                None: no limit.
-            robot: Robot parameters.
-            human: Human parameters.
-            risk_params: Constants of the risk metric.
-            safety_spec: Thresholds of the safety specification.
             render_mode: None or ``rgb_array``.
+            **changes: Fields of :class:`~hazardhunt.sim.simulation.SimulationSettings` to
+                change in ``settings``, e.g. ``decision_period=1.0`` (also through
+                ``gymnasium.make``).
         """
         simulation = Simulation.build(
             scenario,
             field,
-            decision_period,
-            solver=solver,
+            settings,
             controller=controller,
             safety_layer=safety_layer,
-            physics_step=physics_step,
-            termination=termination,
-            max_failed_commands=max_failed_commands,
-            controller_timeout=controller_timeout,
-            robot=robot,
-            human=human,
-            risk_params=risk_params,
-            safety_spec=safety_spec,
+            **changes,
         )
         self._wrap(simulation, reward, render_mode)
 

@@ -5,6 +5,7 @@ from hazardhunt.sim.simulation import (
     EpisodeResult,
     Policy,
     Simulation,
+    SimulationSettings,
 )
 
-__all__ = ["DecisionReport", "EpisodeResult", "Policy", "Simulation"]
+__all__ = ["DecisionReport", "EpisodeResult", "Policy", "Simulation", "SimulationSettings"]

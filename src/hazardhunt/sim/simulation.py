@@ -13,8 +13,10 @@ the human and the controller computes its command; (2) the safety layer checks i
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -59,6 +61,37 @@ Policy = Callable[["Simulation"], Action]
 """Chooses the human's next action from the simulation's current state."""
 
 _NO_COMMAND = ControlCommand(speed=0.0, yaw_rate=0.0, status="not started")
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Every setting of a simulation but its scenario, field and plug-ins, in one bundle (the
+    simulation, the Gymnasium environment, a run and its configuration all take this one):
+    defaults from SPEC."""
+
+    decision_period: float = 2.0
+    """Time the human holds each action, in s; a multiple of the controller's period, at most
+    the episode's duration."""
+    physics_step: float = 0.05
+    """Physics time step, in s."""
+    termination: TerminationParams = TerminationParams()
+    """Episode duration and stall limit."""
+    max_failed_commands: int = 5
+    """Consecutive failed controller commands that end the episode as ``sut_error``."""
+    controller_timeout: float | None = None
+    """Wall-clock limit on each call of the controller and of the safety layer, in s (see
+    :class:`~hazardhunt.sut.guard.TimeLimit`); a call that exceeds it ends the episode as
+    ``sut_error``. None: no limit."""
+    solver: str = "fatrop"
+    """The built-in NMPC's solver, ``fatrop`` or ``ipopt`` (unused with a controller plug-in)."""
+    robot: RobotParams = RobotParams()
+    """The robot's size and limits (the controller receives them in ``reset``)."""
+    human: HumanParams = HumanParams()
+    """The human's size and limits."""
+    risk: RiskParams = RiskParams()
+    """Constants of the risk metric."""
+    safety_spec: SafetySpecParams = SafetySpecParams()
+    """Thresholds of the safety specification."""
 
 
 @dataclass(frozen=True)
@@ -119,16 +152,7 @@ class Simulation:
         field: FieldShape,
         controller: Controller,
         safety_layer: SafetyLayer,
-        *,
-        decision_period: float = 2.0,
-        physics_step: float = 0.05,
-        termination: TerminationParams = TerminationParams(),
-        max_failed_commands: int = 5,
-        controller_timeout: float | None = None,
-        robot: RobotParams = RobotParams(),
-        human: HumanParams = HumanParams(),
-        risk_params: RiskParams = RiskParams(),
-        safety_spec: SafetySpecParams = SafetySpecParams(),
+        settings: SimulationSettings = SimulationSettings(),
     ) -> None:
         """Assemble a simulation from its parts (:meth:`build` builds them from names).
 
@@ -137,36 +161,31 @@ class Simulation:
             field: The protective field's shape (what the classifier and pictures see).
             controller: The robot's controller.
             safety_layer: The safety layer.
-            decision_period: Time the human holds each action, in s; a multiple of the
-                controller's period, at most the episode's duration.
-            physics_step: Physics time step, in s.
-            termination: Episode duration and stall limit.
-            max_failed_commands: Consecutive failed controller commands that end the episode
-                as ``sut_error``.
-            controller_timeout: Wall-clock limit on each call of the controller and of the
-                safety layer, in s (see :class:`~hazardhunt.sut.guard.TimeLimit`); a call
-                that exceeds it ends the episode as ``sut_error``. None: no limit.
-            robot: Robot parameters (the controller receives them in ``reset``).
-            human: Human parameters.
-            risk_params: Constants of the risk metric.
-            safety_spec: Thresholds of the safety specification.
+            settings: Periods, limits, the robot's and human's parameters, risk and
+                specification constants.
 
         Raises:
             ScenarioError: No route leads through the scenario's waypoints to its goal.
             PeriodError: The periods do not fit into each other or into the episode.
             ValueError: ``controller_timeout`` is not a positive number of seconds.
         """
-        self.scenario, self.field = scenario, field
+        self.scenario, self.field, self.settings = scenario, field, settings
         self.controller, self.safety_layer = controller, safety_layer
-        self.robot_params, self.human_params = robot, human
-        self.risk_params, self.safety_spec = risk_params, safety_spec
-        self.termination, self.max_failed_commands = termination, max_failed_commands
-        self.physics_step, self.decision_period = physics_step, decision_period
+        self.robot_params, self.human_params = settings.robot, settings.human
+        self.risk_params, self.safety_spec = settings.risk, settings.safety_spec
+        self.termination = termination = settings.termination
+        self.max_failed_commands = settings.max_failed_commands
+        self.physics_step = physics_step = settings.physics_step
+        self.decision_period = settings.decision_period
+        robot = settings.robot
         self._control_every, controls_per_decision = check_periods(
-            physics_step, controller.control_period, decision_period, termination.episode_duration
+            physics_step,
+            controller.control_period,
+            settings.decision_period,
+            termination.episode_duration,
         )
         self._physics_per_decision = self._control_every * controls_per_decision
-        self._time_limit = TimeLimit(controller_timeout)
+        self._time_limit = TimeLimit(settings.controller_timeout)
         self._call_control: Callable[..., Any] = controller.control
         """The controller's ``control``, under the time limit if there is one (bound again at
         every reset, so that a method replaced in between is the one called)."""
@@ -188,52 +207,51 @@ class Simulation:
         cls,
         scenario: str | Scenario = "crossing",
         field: str = "1.25m",
-        decision_period: float = 2.0,
+        settings: SimulationSettings | float = SimulationSettings(),
         *,
-        solver: str = "fatrop",
         controller: Controller | None = None,
         safety_layer: SafetyLayer | None = None,
-        robot: RobotParams = RobotParams(),
-        human: HumanParams = HumanParams(),
-        **options: Any,
+        **changes: Any,
     ) -> Simulation:
         """A simulation from names: the built-in NMPC and laser field unless given others.
 
         Args:
             scenario: A built-in scenario name, a scenario file path, or a loaded scenario.
             field: ``none``, ``1.25m``, ``2m`` or a field setting the scenario defines.
-            decision_period: Time the human holds each action, in s.
-            solver: The NMPC's solver (ignored with ``controller``).
+            settings: The simulation's settings (a number: the decision period, as the third
+                argument was before 0.2.0, with a warning).
             controller: The robot's controller; the CasADi NMPC when None.
             safety_layer: The safety layer; the laser field of ``field`` when None.
-            robot: Robot parameters.
-            human: Human parameters.
-            **options: The remaining keyword arguments of :class:`Simulation`.
+            **changes: Fields of :class:`SimulationSettings` to change in ``settings``
+                (``decision_period=0.2``, ``robot=RobotParams(...)``, ...).
 
         Raises:
             ScenarioError: The scenario does not load.
             PeriodError: Periods that do not fit.
             ValueError: An unknown field setting or solver.
+            TypeError: A change that is no field of :class:`SimulationSettings`.
         """
+        if isinstance(settings, (int, float)):
+            warnings.warn(
+                "Simulation.build(scenario, field, DECISION_PERIOD) is the call of hazardhunt "
+                "0.1.0; pass decision_period=... or settings=SimulationSettings(...)",
+                FutureWarning,
+                stacklevel=2,
+            )
+            settings, changes = SimulationSettings(), {"decision_period": settings, **changes}
+        if not isinstance(settings, SimulationSettings):
+            raise TypeError(f"settings must be a SimulationSettings, not {type(settings).__name__}")
+        settings = dataclasses.replace(settings, **changes) if changes else settings
         loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         shape = field_shape(loaded, field)
         if controller is None:
             from hazardhunt.sut.nmpc import NMPCController, NMPCParams
 
-            params = NMPCParams(solver=solver)  # type: ignore[arg-type]
-            controller = NMPCController(params, robot=robot, human=human)
+            params = NMPCParams(solver=settings.solver)  # type: ignore[arg-type]
+            controller = NMPCController(params, robot=settings.robot, human=settings.human)
         if safety_layer is None:
-            safety_layer = LaserSafetyLayer.for_field(shape, robot)
-        return cls(
-            loaded,
-            shape,
-            controller,
-            safety_layer,
-            decision_period=decision_period,
-            robot=robot,
-            human=human,
-            **options,
-        )
+            safety_layer = LaserSafetyLayer.for_field(shape, settings.robot)
+        return cls(loaded, shape, controller, safety_layer, settings)
 
     # ------------------------------------------------------------------ episode
     @property
