@@ -25,7 +25,8 @@ from pathlib import Path
 import pandas as pd
 
 from hazardhunt.analysis import figures, tables
-from hazardhunt.analysis.report import loitering_frames, markdown_table
+from hazardhunt.analysis.page import markdown_table
+from hazardhunt.analysis.report import loitering_frames
 from hazardhunt.analysis.results import Results, load_results_of
 from hazardhunt.analysis.study import STUDY_EPISODES, STUDY_REWARDS
 from hazardhunt.campaign.replay import load_run_config, names_sut_plugins, replay_actions

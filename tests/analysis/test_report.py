@@ -270,7 +270,10 @@ def test_a_table_the_campaign_cannot_fill_says_which_testers_it_needs(campaign, 
     shutil.copytree(campaign, copy, ignore=leave_out)
     page = report_module._Report(tmp_path / "report")
     report_module._table_sections(page, load_results(copy), report_module.TABLE_SECTIONS)
-    said = {section.title: " ".join(section.parts) for section in page.sections}
+    said = {
+        section.title: " ".join(str(getattr(block, "text", "")) for block in section.blocks)
+        for section in page.sections
+    }
     runtime = said["Runtime: accumulated vs maximum reward (Table II)"]
     assert "It needs ppo-acc and ppo-max on the same (scenario, field)" in runtime
     lesson_1 = said["Lesson 1: does RL find more failures than random sampling?"]

@@ -15,8 +15,6 @@ or safety layer is a plug-in are drawn from their stored trajectories instead of
 
 from __future__ import annotations
 
-import base64
-import html
 import json
 import os
 import shutil
@@ -27,9 +25,11 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from markupsafe import Markup, escape
 
 import hazardhunt
-from hazardhunt.analysis import diversity, figures, tables, verdict
+from hazardhunt.analysis import diversity, figures, page, tables, verdict
+from hazardhunt.analysis.page import Commands, Heading, Prose, Section, Text, markdown_table
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.config import RunConfig, file_name
@@ -74,20 +74,13 @@ Progress = Callable[[str], None]
 
 
 @dataclass
-class _Section:
-    title: str
-    intro: str = ""
-    parts: list[str] = field(default_factory=list)
-
-
-@dataclass
 class _Report:
     """What has been written so far, to assemble the HTML page from."""
 
     directory: Path
-    sections: list[_Section] = field(default_factory=list)
+    sections: list[Section] = field(default_factory=list)
     tables: dict[str, pd.DataFrame] = field(default_factory=dict)
-    opening: _Section | None = None
+    opening: Section | None = None
     """What the page opens with, before the study's sections."""
     findings: verdict.Verdict | None = None
 
@@ -95,32 +88,23 @@ class _Report:
     def figures(self) -> Path:
         return self.directory / "figures"
 
-    def section(self, title: str, intro: str = "") -> _Section:
-        section = _Section(title, intro)
+    def section(self, title: str, intro: str = "") -> Section:
+        section = Section(title, intro)
         self.sections.append(section)
         return section
 
-    def table(self, section: _Section, name: str, table: pd.DataFrame, caption: str = "") -> None:
+    def table(self, section: Section, name: str, table: pd.DataFrame, caption: str = "") -> None:
         """Write ``tables/<name>.csv`` and ``.md`` and show the table in ``section``."""
         self.tables[name] = table
         folder = self.directory / "tables"
         folder.mkdir(parents=True, exist_ok=True)
         table.to_csv(folder / f"{name}.csv", index=False)
         (folder / f"{name}.md").write_text(markdown_table(table) + "\n")
-        shown = html.escape(caption) if caption else ""
-        section.parts.append(
-            f'<figure class="table" id="table-{name}">{_html_table(table)}'
-            f'<figcaption>{shown} <a href="tables/{name}.csv">CSV</a></figcaption></figure>'
-        )
+        section.blocks.append(page.table(name, table, caption))
 
-    def image(self, section: _Section, path: Path, caption: str) -> None:
+    def image(self, section: Section, path: Path, caption: str) -> None:
         """Inline an image written under ``figures/`` into ``section``."""
-        mime = "image/gif" if path.suffix == ".gif" else "image/png"
-        data = base64.b64encode(path.read_bytes()).decode()
-        section.parts.append(
-            f'<figure><img src="data:{mime};base64,{data}" alt="{html.escape(caption)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>"
-        )
+        section.blocks.append(page.image(path, caption))
 
 
 def write_report(
@@ -284,9 +268,7 @@ def _table_sections(
         table = compute(results, report.tables)
         if table.empty:
             needs = EMPTY_TABLE_NEEDS.get(name, "")
-            section.parts.append(
-                f"<p>The campaign has no runs this table compares.{html.escape(needs)}</p>"
-            )
+            section.blocks.append(Text(f"The campaign has no runs this table compares.{needs}"))
         report.table(section, name, table)
 
 
@@ -353,11 +335,15 @@ def _clusters(report: _Report, results: Results) -> None:
     features = diversity.failure_features(results)
     if features.empty:
         recorded = not results.failures.empty
-        section.parts.append(
-            "<p>No failure's trajectory is stored (a copy made by <code>hazardhunt copy</code> "
-            "leaves them out): the clusters need them.</p>"
+        section.blocks.append(
+            Prose(
+                Markup(
+                    "No failure's trajectory is stored (a copy made by <code>hazardhunt copy"
+                    "</code> leaves them out): the clusters need them."
+                )
+            )
             if recorded
-            else "<p>No failure was recorded.</p>"
+            else Text("No failure was recorded.")
         )
         return
     clustered = diversity.embed(diversity.cluster_failures(features))
@@ -394,14 +380,16 @@ def _reward_hacking(report: _Report, results: Results) -> None:
     report.table(section, "reward_hacking", tables.reward_hacking(results.episodes))
     typical = tables.typical_loitering(results.loitering)
     if typical is None:
-        section.parts.append("<p>No episode matched the loitering pattern.</p>")
+        section.blocks.append(Text("No episode matched the loitering pattern."))
         return
     config = load_run_config(results.run_directory(str(typical["run_id"])))
     if names_sut_plugins(config):
-        section.parts.append(
-            f"<p>The most typical loitering episode ({html.escape(str(typical['run_id']))}, "
-            f"episode {int(typical['episode'])}) ran a plug-in controller or safety layer, "
-            "which the report does not import: it is not re-simulated.</p>"
+        section.blocks.append(
+            Text(
+                f"The most typical loitering episode ({typical['run_id']}, episode "
+                f"{int(typical['episode'])}) ran a plug-in controller or safety layer, which the "
+                "report does not import: it is not re-simulated."
+            )
         )
         return
     simulation, _ = replay_actions(config, typical["actions"])
@@ -455,7 +443,7 @@ def _learning_and_places(report: _Report, results: Results) -> None:
     )
     failures = results.failures
     if failures.empty or "contact_x" not in failures:
-        places.parts.append("<p>No failure was recorded.</p>")
+        places.blocks.append(Text("No failure was recorded."))
         return
     for scenario in sorted(results.runs["scenario"].unique()):
         chosen = failures[failures["scenario"] == scenario]
@@ -472,7 +460,7 @@ def _representatives(report: _Report, results: Results) -> None:
     )
     chosen = tables.representatives(results.failures)
     if chosen.empty:
-        section.parts.append("<p>No failure was recorded.</p>")
+        section.blocks.append(Text("No failure was recorded."))
         return
     rows = []
     for _, row in chosen.iterrows():
@@ -495,7 +483,7 @@ def _representatives(report: _Report, results: Results) -> None:
 
 
 def _failure_pictures(
-    report: _Report, section: _Section, results: Results, row: pd.Series, stem: str, title: str
+    report: _Report, section: Section, results: Results, row: pd.Series, stem: str, title: str
 ) -> str:
     """Draw the failure ``row`` into ``section`` (files named after ``stem``): re-simulated
     with its tracks and an animation of its last seconds, or, when the run's SUT is a plug-in
@@ -517,7 +505,7 @@ def _failure_pictures(
 
 def _replayed_pictures(
     report: _Report,
-    section: _Section,
+    section: Section,
     directory: Path,
     episode: int,
     name: str,
@@ -579,14 +567,20 @@ def _runs(report: _Report, results: Results) -> None:
     section = report.section("Runs", "Every finished run.")
     report.table(section, "runs", results.runs[[c for c in RUN_COLUMNS if c in results.runs]])
     if results.unfinished:
-        section.parts.append(
-            f'<p class="warning">{len(results.unfinished)} runs of the campaign have not '
-            f"finished and are left out: {html.escape(', '.join(results.unfinished))}.</p>"
+        section.blocks.append(
+            Text(
+                f"{len(results.unfinished)} runs of the campaign have not finished and are left "
+                f"out: {', '.join(results.unfinished)}.",
+                "warning",
+            )
         )
     for run_id, damage in results.damaged.items():
-        section.parts.append(
-            f'<p class="warning">Run {html.escape(run_id)} is damaged and left out: '
-            f"{html.escape(damage)}. Running the campaign again redoes it.</p>"
+        section.blocks.append(
+            Text(
+                f"Run {run_id} is damaged and left out: {damage}. Running the campaign again "
+                "redoes it.",
+                "warning",
+            )
         )
 
 
@@ -595,18 +589,16 @@ def _verdict(report: _Report, results: Results) -> None:
     what and how to keep the failures as regression cases."""
     findings = verdict.verdict(results, report.tables.get("clusters"))
     report.findings = findings
-    section = _Section("Verdict")
+    section = Section("Verdict")
     report.opening = section
-    section.parts.append(f'<p class="headline">{_headline(findings)}</p>')
+    section.blocks.append(Prose(_headline(findings), "headline"))
     worst = verdict.worst_failure(results.failures)
     if worst is not None:
-        section.parts.append("<h3>The worst failure</h3>")
-        section.parts.append(
-            f"<p>{_worst_facts(worst)} Worst means {html.escape(verdict.WORST_RULE)}.</p>"
-        )
+        section.blocks.append(Heading("The worst failure"))
+        section.blocks.append(Text(f"{_worst_facts(worst)} Worst means {verdict.WORST_RULE}."))
         title = f"Worst: {worst['class']}, {worst['run_id']}, episode {int(worst['episode'])}"
         _failure_pictures(report, section, results, worst, "worst_failure", title)
-    section.parts.append("<h3>Which tester found what</h3>")
+    section.blocks.append(Heading("Which tester found what"))
     report.table(
         section,
         "verdict_testers",
@@ -629,8 +621,9 @@ def _verdict(report: _Report, results: Results) -> None:
     _incomplete_runs(section, results)
 
 
-def _headline(findings: verdict.Verdict) -> str:
-    """The verdict in one sentence or two, numbers in bold."""
+def _headline(findings: verdict.Verdict) -> Markup:
+    """The verdict in one sentence or two, numbers in bold (the only text in it, the class
+    names, escaped)."""
     played = f"in {findings.episodes} episodes of {findings.runs} run{_s(findings.runs)}"
     untested = ""
     if findings.sut_errors:
@@ -643,8 +636,8 @@ def _headline(findings: verdict.Verdict) -> str:
         )
     if not findings.failures:
         if findings.sut_errors >= findings.episodes:
-            return f"<strong>Nothing was tested</strong> {played}.{untested}"
-        return (
+            return Markup(f"<strong>Nothing was tested</strong> {played}.{untested}")
+        return Markup(
             f"<strong>No unsafe failure</strong> {played}: the failure rate is below "
             f"{findings.rate_bound:.2g} per tested episode (95 % confidence, "
             f"Clopper-Pearson).{untested}"
@@ -653,7 +646,7 @@ def _headline(findings: verdict.Verdict) -> str:
     text = (
         f"<strong>{findings.failures} unsafe failure{_s(findings.failures)}</strong> {played}, "
         f"<strong>{classes} distinct mechanism{_s(classes)}</strong> (failure classes"
-        f"{': ' + html.escape(', '.join(findings.classes)) if classes else ''})"
+        f"{': ' + escape(', '.join(findings.classes)) if classes else ''})"
     )
     if findings.unclassified:
         text += f"; {findings.unclassified} failure{_s(findings.unclassified)} fit no class"
@@ -662,12 +655,12 @@ def _headline(findings: verdict.Verdict) -> str:
             f"; their trajectories form <strong>{findings.clusters} "
             f"cluster{_s(findings.clusters)}</strong>"
         )
-    return text + "." + untested
+    return Markup(text + "." + untested)
 
 
 def _worst_facts(worst: pd.Series) -> str:
     field = "no protective field" if worst["field"] == "none" else f"the {worst['field']} field"
-    return html.escape(
+    return (
         f"{worst['class']} in {worst['scenario']} with {field}, found by {worst['tester']} "
         f"(seed {int(worst['seed'])}, episode {int(worst['episode'])}): the human touched the "
         f"robot's {worst['contact_face']} face at {float(worst['sim_time']):.1f} s, risk "
@@ -675,27 +668,33 @@ def _worst_facts(worst: pd.Series) -> str:
     )
 
 
-def _regression_commands(section: _Section, results: Results) -> None:
+def _regression_commands(section: Section, results: Results) -> None:
     plugins = any(
         names_sut_plugins(load_run_config(Path(directory)))
         for directory in results.runs["directory"]
     )
     commands = verdict.regression_commands(results.directory, plugins)
-    section.parts.append("<h3>Keep them as regression cases</h3>")
-    section.parts.append(
-        f'<pre class="commands"><code>{html.escape(chr(10).join(commands))}</code></pre>'
-        "<p>export writes one case file per class, scenario and field (--all: one per failure; "
-        "--pytest: also a pytest module); regress re-runs every case against the system under "
-        "test and exits with 1 while any still fails, so that it can gate a CI job.</p>"
+    section.blocks.append(Heading("Keep them as regression cases"))
+    section.blocks.append(Commands(tuple(commands)))
+    section.blocks.append(
+        Text(
+            "export writes one case file per class, scenario and field (--all: one per failure; "
+            "--pytest: also a pytest module); regress re-runs every case against the system "
+            "under test and exits with 1 while any still fails (3 while any could not be "
+            "tested), so that it can gate a CI job."
+        )
     )
 
 
-def _incomplete_runs(section: _Section, results: Results) -> None:
+def _incomplete_runs(section: Section, results: Results) -> None:
     missing = len(results.unfinished) + len(results.damaged)
     if missing:
-        section.parts.append(
-            f'<p class="warning">{missing} run{_s(missing)} of the campaign '
-            f"{'is' if missing == 1 else 'are'} unfinished or damaged and left out (see Runs).</p>"
+        section.blocks.append(
+            Text(
+                f"{missing} run{_s(missing)} of the campaign {'is' if missing == 1 else 'are'} "
+                "unfinished or damaged and left out (see Runs).",
+                "warning",
+            )
         )
 
 
@@ -743,76 +742,12 @@ def _verdict_summary(report: _Report) -> dict[str, Any] | None:
     }
 
 
-_STYLE = """
-* { box-sizing: border-box; }
-body { font-family: system-ui, sans-serif; margin: 1em auto; padding: 0 1em; max-width: 1200px;
-  color: #222; overflow-wrap: anywhere; }
-h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; overflow-wrap: normal; }
-th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
-th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
-figure { margin: 1em 1em 1em 0; display: inline-block; vertical-align: top; max-width: 100%; }
-figure.table { display: block; overflow-x: auto; } img { max-width: 100%; height: auto; }
-figcaption { font-size: 0.85em; color: #555; }
-pre { overflow-x: auto; background: #f6f6f6; padding: 0.5em; }
-.verdict { border: 2px solid #444; border-radius: 6px; padding: 0 1em 0.5em; }
-.verdict h2 { margin-top: 0.5em; } .headline { font-size: 1.15em; }
-.verdict img { width: 420px; }
-.warning { color: #b00; }
-"""
-
-
 def _page(results: Results, report: _Report) -> str:
     runs = results.runs
-    contents = "".join(
-        f'<li><a href="#s{i}">{html.escape(s.title)}</a></li>'
-        for i, s in enumerate(report.sections)
-    )
-    body = "".join(
-        f'<section id="s{i}"><h2>{html.escape(s.title)}</h2>'
-        f"<p>{html.escape(s.intro)}</p>{''.join(s.parts)}</section>"
-        for i, s in enumerate(report.sections)
-    )
     facts = (
         f"{len(runs)} runs, {int(runs['episodes'].sum())} episodes, "
         f"{int(runs['failures'].sum())} failures; "
         f"hazardhunt {hazardhunt.__version__}, "
         f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
     )
-    return (
-        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>hazardhunt report: {html.escape(results.directory.name)}</title>"
-        f"<style>{_STYLE}</style></head><body>"
-        f"<h1>hazardhunt report: {html.escape(str(results.directory))}</h1>"
-        f"{_verdict_html(report)}"
-        f"<p>{html.escape(facts)}</p><ol>{contents}</ol>{body}</body></html>"
-    )
-
-
-def _verdict_html(report: _Report) -> str:
-    if report.opening is None:
-        return ""
-    return (
-        f'<section id="verdict" class="verdict"><h2>{html.escape(report.opening.title)}</h2>'
-        f"{''.join(report.opening.parts)}</section>"
-    )
-
-
-def _html_table(table: pd.DataFrame) -> str:
-    return str(table.to_html(index=False, float_format=_number, border=0, na_rep=""))
-
-
-def markdown_table(table: pd.DataFrame) -> str:
-    """A table in GitHub Markdown, numbers to four significant digits."""
-    header = "| " + " | ".join(str(c) for c in table.columns) + " |"
-    rule = "|" + "|".join("---" for _ in table.columns) + "|"
-    lines = [header, rule]
-    for row in table.itertuples(index=False):
-        cells = [_number(v) if isinstance(v, float) else str(v) for v in row]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines)
-
-
-def _number(value: float) -> str:
-    return "" if pd.isna(value) else f"{value:.4g}"
+    return page.render_page(results.directory, report.opening, report.sections, facts)
