@@ -471,3 +471,25 @@ def test_a_campaign_file_with_a_bad_tester_plug_in_names_the_file_and_key(tmp_pa
     )
     with pytest.raises(ConfigError, match=f"campaign.toml: {message}"):
         load_campaign(campaign)
+
+
+def test_validating_a_configuration_builds_each_registered_tester_once(monkeypatch):
+    from hazardhunt.campaign import config as config_module
+
+    built = []
+    real = config_module.make_tester
+
+    def counting(name, seed, params=None):
+        built.append(name)
+        return real(name, seed, params)
+
+    monkeypatch.setattr(config_module, "make_tester", counting)
+    RunConfig(
+        scenario="crossing",
+        field="none",
+        tester="qd",
+        tester_params={"batch_size": 4},
+        seed=0,
+        episodes=8,
+    )
+    assert built == ["qd"]

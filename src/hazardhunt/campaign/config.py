@@ -319,11 +319,8 @@ class RunConfig(_Strict):
     def _tester_accepts_params(cls, values: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
         if "tester" not in info.data:  # the tester's own error is reported
             return values
-        if info.data.get("tester_plugin") is not None:
-            if values:
-                raise ValueError("a user's tester takes the parameters of tester_plugin")
-        else:
-            _check_tester_params(info.data["tester"], values, ())
+        if info.data.get("tester_plugin") is not None and values:
+            raise ValueError("a user's tester takes the parameters of tester_plugin")
         return values
 
     @model_validator(mode="after")
@@ -335,9 +332,7 @@ class RunConfig(_Strict):
                     _check_tester(self.tester)
                 except ValueError as error:
                     raise invalid(("tester",), str(error), self.tester) from None
-            _check_tester_for_episodes(
-                self.tester, self.tester_params, self.env, ("tester_params",)
-            )
+            _check_tester_params(self.tester, self.tester_params, self.env, ("tester_params",))
         problem = route_problem(self.scenario, self.env.robot)
         if problem is not None:
             raise invalid(("scenario",), problem, self.scenario)
@@ -385,14 +380,13 @@ class CampaignConfig(_Strict):
 
     @field_validator("tester")
     @classmethod
-    def _testers_accept_params(cls, values: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    def _testers_known(cls, values: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         for name, params in values.items():
             if "method" not in params:
                 try:
                     _check_tester(name)
                 except ValueError as error:
                     raise invalid((name,), str(error), name) from None
-            _check_tester_params(name, params, (name,))
         return values
 
     @field_validator("seeds")
@@ -413,11 +407,9 @@ class CampaignConfig(_Strict):
                     _check_tester(name)
                 except ValueError as error:
                     raise invalid(("testers", index), str(error), name) from None
-        for name in self.testers:
+        for name in dict.fromkeys([*self.tester, *self.testers]):
             if name not in self.tester_plugins:
-                _check_tester_for_episodes(
-                    name, self.tester.get(name, {}), self.env, ("tester", name)
-                )
+                _check_tester_params(name, self.tester.get(name, {}), self.env, ("tester", name))
         for index, scenario in enumerate(self.scenarios):
             problem = route_problem(scenario, self.env.robot)
             if problem is not None:
@@ -468,28 +460,17 @@ class CampaignConfig(_Strict):
 
 
 def _check_tester_params(
-    tester: str, params: dict[str, Any], location: tuple[str | int, ...]
+    tester: str, params: dict[str, Any], env: EnvOptions, location: tuple[str | int, ...]
 ) -> None:
-    """Raises a validation error at ``location`` + the parameter's key when tester ``tester``
-    does not accept ``params``."""
-    if not params:
-        return
+    """Raises a validation error at ``location`` + the parameter's key when the registered
+    tester ``tester`` does not accept ``params``, or cannot search episodes of this length
+    (its ``check_horizon``). Builds the tester once (which builds no model)."""
     try:
-        make_tester(tester, 0, params)  # builds no model: only checks the parameters
+        built = make_tester(tester, 0, params)
     except TesterParameterError as error:
         raise invalid((*location, error.key), error.problem, params.get(error.key)) from None
     except ValueError:
         return  # an unknown tester: reported where it is named
-
-
-def _check_tester_for_episodes(
-    tester: str, params: dict[str, Any], env: EnvOptions, location: tuple[str | int, ...]
-) -> None:
-    """Raises a validation error at ``location`` + the parameter's key when the registered
-    tester ``tester`` cannot search episodes of this length (its ``check_horizon``)."""
-    if tester not in TESTERS and "method" not in params:
-        return
-    built = make_tester(tester, 0, params)
     check = getattr(built, "check_horizon", None)
     if check is None:
         return
@@ -593,8 +574,9 @@ def check_output_location(out: Path, option: str = "--out") -> None:
 
 def check_plugins(config: RunConfig | CampaignConfig) -> None:
     """Build every plug-in ``config`` names once, so that a bad one stops a run or campaign
-    before anything runs. Validating a configuration builds nothing; this is called where a
-    command line or a campaign file is read.
+    before anything runs. Validating a configuration builds no plug-in (only the registered
+    testers, once each, to check their parameters); this is called where a command line or a
+    campaign file is read.
 
     Raises:
         ConfigError: Naming the configuration's key and the problem.
