@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.sut import nmpc
+from hazardhunt.sut import nmpc_problem
 from hazardhunt.sut.compiled import compile_solvers
 from hazardhunt.sut.nmpc import NMPCController, NMPCParams
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
@@ -95,7 +95,7 @@ class Bench:
 
     def __init__(self, problems: list[dict[str, Any]]) -> None:
         self.params = NMPCParams()
-        self.problem = nmpc._Problem(self.params, NMPCController().robot)
+        self.problem = nmpc_problem.Problem(self.params, NMPCController().robot)
         self.nlp, self.equality, _, _ = self.problem._formulate()
         self.problems = problems
         reference = ca.nlpsol(
@@ -111,10 +111,10 @@ class Bench:
 
     def command(self, x: np.ndarray) -> np.ndarray:
         stages = x.take(self.problem.stage_source).reshape(self.params.horizon + 1, -1)
-        return stages[1, [nmpc._SPEED, nmpc._YAW_RATE]]
+        return stages[1, [nmpc_problem.SPEED, nmpc_problem.YAW_RATE]]
 
     def fatrop(self, changes: dict[str, float]) -> Solve:
-        options = nmpc._solver_options(self.params, self.equality, True)
+        options = nmpc_problem.solver_options(self.params, self.equality, True)
         options["fatrop"].update(changes)
         if "bound_push" in changes:
             options["fatrop"]["bound_frac"] = changes["bound_push"]
