@@ -4,7 +4,8 @@ Imports flow one way, from the top of this list to the bottom: a module may impo
 package and any package below it, never one above (``docs/design.md`` explains each layer).
 Imports inside functions count too. The script also lists every function longer than
 ``MAX_FUNCTION_LINES`` lines (its docstring not counted) whose docstring does not say why it is
-long (a docstring containing "long because").
+long (a docstring containing "long because"), and every module over ``MAX_MODULE_LINES`` lines
+whose docstring does not say why.
 
     python scripts/check_architecture.py           # exit 1 on a violation
     python scripts/check_architecture.py --graph   # also print the package import graph
@@ -36,6 +37,8 @@ LAYERS = (
 version, registration) is below them all."""
 
 MAX_FUNCTION_LINES = 60
+MAX_MODULE_LINES = 500
+"""A longer module says why in its docstring ("long ... because")."""
 SOURCE = Path(__file__).resolve().parents[1] / "src" / "hazardhunt"
 
 
@@ -104,6 +107,13 @@ def main() -> int:
             graph[package or "(root)"].add(imported or "(root)")
             if imported not in ("", *LAYERS) or rank(imported) > rank(package):
                 problems.append(f"{where}:{line}: {package or 'root'} imports {imported}, above it")
+        lines = len(path.read_text(encoding="utf-8").splitlines())
+        docstring = (ast.get_docstring(tree) or "").lower()
+        if lines > MAX_MODULE_LINES and not ("long" in docstring and "because" in docstring):
+            problems.append(
+                f"{where}: {lines} lines (over {MAX_MODULE_LINES}; split it, or say why in its "
+                "docstring: 'long because ...')"
+            )
         for name, line, length in long_functions(tree):
             problems.append(
                 f"{where}:{line}: {name} has {length} lines (over {MAX_FUNCTION_LINES}; "

@@ -1,4 +1,8 @@
-"""The ``hazardhunt`` command."""
+"""The ``hazardhunt`` command.
+
+Long (over 500 lines) because each subcommand's signature is its options, with their help
+texts: the commands only read their options and call the packages below, which do the work.
+"""
 
 from __future__ import annotations
 

@@ -11,6 +11,10 @@ Writes ``DIR/report/`` (into a hidden sibling first, renamed into place once com
 
 Writing a report imports nothing that the results name: the failures of a run whose controller
 or safety layer is a plug-in are drawn from their stored trajectories instead of re-simulated.
+The page itself is a Jinja2 template (:mod:`hazardhunt.analysis.page`).
+
+Long (over 500 lines) because it is one section-writer per section of the page, each a few
+lines of prose around a table or figure that ``tables`` and ``figures`` compute.
 """
 
 from __future__ import annotations

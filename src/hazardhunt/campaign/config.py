@@ -1,4 +1,9 @@
-"""Typed, validated configuration of a run and of a campaign (a grid of runs)."""
+"""Typed, validated configuration of a run and of a campaign (a grid of runs).
+
+Long (over 500 lines) because every rule a configuration must satisfy before anything runs
+(types, ranges, scenario files and routes, tester settings, run names) is checked here, so that
+a bad campaign file is one error naming its key.
+"""
 
 from __future__ import annotations
 

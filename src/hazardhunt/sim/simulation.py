@@ -9,6 +9,10 @@ One decision holds the human's (speed, turn rate) for the decision period while 
 underneath. Within one physics step the order is: (1) at a control instant, the cameras track
 the human and the controller computes its command; (2) the safety layer checks its field;
 (3) robot and human move; (4) contact, clearance, risk and termination are evaluated.
+
+Long (over 500 lines) because it is the one loop every part of hazardhunt plays episodes with:
+its physics step, the SUT's calls and their guards, and the episode's summary and trajectory
+read and write the same state, and splitting them would scatter that state over modules.
 """
 
 from __future__ import annotations
