@@ -36,13 +36,12 @@ from hazardhunt.analysis import diversity, figures, page, tables, verdict
 from hazardhunt.analysis.page import Commands, Heading, Prose, Section, Text, markdown_table
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
-from hazardhunt.campaign.config import RunConfig, file_name
+from hazardhunt.campaign.config import file_name
 from hazardhunt.campaign.lock import process_running, waiting_lock
 from hazardhunt.campaign.replay import (
     load_run_config,
     names_sut_plugins,
     replay_actions,
-    replay_failure,
 )
 from hazardhunt.campaign.store import (
     left_out,
@@ -50,12 +49,11 @@ from hazardhunt.campaign.store import (
     write_bytes_atomic,
     write_json_atomic,
 )
-from hazardhunt.env.rendering import animate_episode, plot_episode, plot_frames
+from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode, plot_frames
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.sut.route import scenario_route
-from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.world.scenario import load_scenario
 
 RUN_COLUMNS = (
@@ -459,8 +457,9 @@ def _learning_and_places(report: _Report, results: Results) -> None:
 def _representatives(report: _Report, results: Results) -> None:
     section = report.section(
         "A representative failure per class",
-        "For every class found, the failure whose time to contact is the class's median, "
-        "re-simulated from its record: its tracks and an animation of its last seconds.",
+        "For every class found, the failure whose time to contact is the class's median, drawn "
+        "from its stored trajectory: its tracks and an animation of its last seconds "
+        "(hazardhunt replay plays it again and says whether it reproduces).",
     )
     chosen = tables.representatives(results.failures)
     if chosen.empty:
@@ -470,7 +469,7 @@ def _representatives(report: _Report, results: Results) -> None:
     for _, row in chosen.iterrows():
         run_id, episode, name = str(row["run_id"]), int(row["episode"]), str(row["class"])
         title = f"{name}: {run_id}, episode {episode}"
-        replayed = _failure_pictures(report, section, results, row, f"class_{name}", title)
+        drawn = _failure_pictures(report, section, results, row, f"class_{name}", title)
         rows.append(
             {
                 "class": name,
@@ -478,7 +477,7 @@ def _representatives(report: _Report, results: Results) -> None:
                 "episode": episode,
                 "sim_time": row["sim_time"],
                 "contact_face": row["contact_face"],
-                "replayed": replayed,
+                "pictures": drawn,
             }
         )
     report.table(
@@ -489,70 +488,41 @@ def _representatives(report: _Report, results: Results) -> None:
 def _failure_pictures(
     report: _Report, section: Section, results: Results, row: pd.Series, stem: str, title: str
 ) -> str:
-    """Draw the failure ``row`` into ``section`` (files named after ``stem``): re-simulated
-    with its tracks and an animation of its last seconds, or, when the run's SUT is a plug-in
-    (which the report does not import), from its stored trajectory; whether it reproduced."""
+    """Draw the failure ``row`` into ``section`` (files named after ``stem``) from its stored
+    trajectory, its tracks and an animation of its last seconds; no SUT is built. Returns how
+    it was drawn."""
     run_id, episode = str(row["run_id"]), int(row["episode"])
     directory = results.run_directory(run_id)
+    if "trajectories" in left_out(directory):
+        return "not drawn: a copy without trajectories (hazardhunt replay draws it)"
     config = load_run_config(directory)
-    if names_sut_plugins(config):
-        if "trajectories" in left_out(directory):
-            return "not replayed (plug-in SUT) nor drawn (a copy without trajectories)"
-        field = results.field_shape(str(row["field"]), str(row["scenario"]))
-        picture = _recorded_picture(
-            report.figures / f"{file_name(stem)}.png", directory, config, field, row, title
-        )
-        report.image(section, picture, f"{title} (as recorded)")
-        return "not replayed (plug-in SUT)"
-    return _replayed_pictures(report, section, directory, episode, str(row["class"]), stem, title)
-
-
-def _replayed_pictures(
-    report: _Report,
-    section: Section,
-    directory: Path,
-    episode: int,
-    name: str,
-    stem: str,
-    title: str,
-) -> str:
-    """Re-simulate a failure of a run with the built-in SUT, draw it and its last seconds;
-    whether it reproduced."""
-    replay = replay_failure(directory, episode)
+    scenario = load_scenario(config.scenario)
+    robot = config.env.robot
+    recorded = RecordedEpisode(
+        scenario,
+        scenario_route(scenario, robot.width),
+        results.field_shape(str(row["field"]), str(row["scenario"])),
+        robot,
+        tuple(read_trajectory(directory, episode)),
+    )
     stem = file_name(stem)
-    simulation = replay.simulation
     picture = plot_episode(
         report.figures / f"{stem}.png",
-        simulation.scenario,
-        simulation.route,
-        simulation.trajectory(),
-        simulation.field,
+        recorded.scenario,
+        recorded.route,
+        recorded.samples,
+        recorded.field,
         title,
-        replay.result.outcome,
+        str(row["outcome"]),
+        robot,
     )
+    name = str(row["class"])
     animation = animate_episode(
-        report.figures / f"{stem}.gif",
-        simulation,
-        title=name,
-        fps=5,
-        last_seconds=6.0,
-        size=4.5,
+        report.figures / f"{stem}.gif", recorded, title=name, fps=5, last_seconds=6.0, size=4.5
     )
     report.image(section, picture, title)
     report.image(section, animation, f"{name}: the last 6 s")
-    return "reproduced" if replay.matches else "NOT reproduced"
-
-
-def _recorded_picture(
-    path: Path, directory: Path, config: RunConfig, field: FieldShape, row: pd.Series, title: str
-) -> Path:
-    """Draw a failure of the run in ``directory`` from its stored trajectory (no SUT is
-    built)."""
-    scenario = load_scenario(config.scenario)
-    robot = config.env.robot
-    route = scenario_route(scenario, robot.width)
-    trajectory = read_trajectory(directory, int(row["episode"]))
-    return plot_episode(path, scenario, route, trajectory, field, title, str(row["outcome"]), robot)
+    return "drawn as recorded"
 
 
 def _rates(report: _Report, results: Results) -> None:

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -23,6 +24,42 @@ from hazardhunt.world.scenario import Scenario
 
 if TYPE_CHECKING:
     from hazardhunt.sim.simulation import Simulation
+
+
+class Scene(Protocol):
+    """What drawing an episode needs: a played :class:`~hazardhunt.sim.Simulation`, or an
+    episode as a run recorded it (:class:`RecordedEpisode`)."""
+
+    @property
+    def scenario(self) -> Scenario: ...
+    @property
+    def route(self) -> Route: ...
+    @property
+    def field(self) -> FieldShape: ...
+    @property
+    def robot_params(self) -> RobotParams: ...
+    @property
+    def human_params(self) -> HumanParams: ...
+
+    def trajectory(self) -> list[TrajectorySample]:
+        """The episode's samples, every 0.2 s and at its end."""
+        ...
+
+
+@dataclass(frozen=True)
+class RecordedEpisode:
+    """An episode as a run stored it, to draw without building its system under test."""
+
+    scenario: Scenario
+    route: Route
+    field: FieldShape
+    robot_params: RobotParams
+    samples: tuple[TrajectorySample, ...]
+    human_params: HumanParams = HumanParams()
+
+    def trajectory(self) -> list[TrajectorySample]:
+        return list(self.samples)
+
 
 OUTCOME_COLOURS = {
     "failure": "#d62728",
@@ -164,7 +201,7 @@ def render_rgb(simulation: Simulation) -> NDArray[np.uint8]:
 
 def animate_episode(
     path: Path,
-    simulation: Simulation,
+    simulation: Scene,
     title: str = "",
     frame_step: int = 1,
     fps: int = 10,
@@ -175,7 +212,7 @@ def animate_episode(
 
     Args:
         path: The GIF to write.
-        simulation: A simulation whose episode has been played.
+        simulation: A simulation whose episode has been played, or a recorded episode.
         title: Shown above every frame, followed by the time.
         frame_step: Use every ``frame_step``-th sample.
         fps: Frames per second of the animation (10 plays twice as fast as real time).
@@ -187,7 +224,7 @@ def animate_episode(
 
     every = simulation.trajectory()
     if not every:
-        raise ValueError("the simulation has no trajectory: play an episode first")
+        raise ValueError("the episode has no trajectory: play an episode first")
     since = -np.inf if last_seconds is None else every[-1].time - last_seconds
     first = next(i for i, row in enumerate(every) if row.time >= since)
     frames = list(range(first, len(every)))[::-1][::frame_step][::-1]
@@ -207,7 +244,7 @@ def animate_episode(
 
 
 def draw_state(
-    ax: Axes, simulation: Simulation, rows: Sequence[TrajectorySample], title: str = ""
+    ax: Axes, simulation: Scene, rows: Sequence[TrajectorySample], title: str = ""
 ) -> None:
     """The floor, both tracks up to the last of ``rows`` and the poses at that sample."""
     sim = simulation
@@ -226,7 +263,7 @@ def draw_state(
 
 def plot_frames(
     path: Path,
-    simulation: Simulation,
+    simulation: Scene,
     times: Sequence[float],
     captions: Sequence[str] | None = None,
     zoom: float | None = 4.0,
@@ -242,7 +279,7 @@ def plot_frames(
     """
     rows = simulation.trajectory()
     if not rows:
-        raise ValueError("the simulation has no trajectory: play an episode first")
+        raise ValueError("the episode has no trajectory: play an episode first")
     figure = Figure(figsize=(3.2 * len(times), 3.4), dpi=90)
     for column, moment in enumerate(times):
         upto = [row for row in rows if row.time <= moment + 1e-9] or rows[:1]
