@@ -32,6 +32,7 @@ from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
+    from hazardhunt.campaign.store import RunSummary
     from hazardhunt.cases import RegressionResult
 
 app = typer.Typer(
@@ -702,7 +703,7 @@ def _validated(build: Callable[[], T]) -> T:
         raise ConfigError(format_validation_error(error)) from None
 
 
-def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
+def _print_run_summary(summary: RunSummary, out: Path) -> None:
     sut_errors = summary["sut_errors"]
     table = Table(
         "episodes",
@@ -723,12 +724,12 @@ def _print_run_summary(summary: dict[str, Any], out: Path) -> None:
         f"{summary['episodes_per_s']:.2f}",
     )
     console.print(table)
-    if sut_errors:
-        first = summary.get("first_sut_error") or {}
+    first = summary.get("first_sut_error")
+    if sut_errors and first is not None:
         console.print(
             f"[red]warning: {sut_errors} of {summary['episodes']} episodes ended in a SUT error "
-            "and tested nothing[/red]; the first, episode "
-            f"{first.get('episode')}: {escape(str(first.get('error')))}",
+            f"and tested nothing[/red]; the first, episode {first['episode']}: "
+            f"{escape(first['error'])}",
             highlight=False,
         )
     console.print(f"results in [bold]{out.resolve()}[/bold]")

@@ -27,7 +27,6 @@ import functools
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from pydantic import ValidationError
 from rich.console import Console
@@ -49,7 +48,7 @@ from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.progress import ProgressDisplay, print_campaign_table
 from hazardhunt.campaign.ray_executor import execute_on_ray
 from hazardhunt.campaign.run import check_sut, is_complete
-from hazardhunt.campaign.store import write_json_atomic
+from hazardhunt.campaign.store import CampaignSummary, write_json_atomic
 from hazardhunt.errors import HazardhuntError
 
 EXECUTORS = ("local", "ray")
@@ -60,7 +59,7 @@ class CampaignFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the 
     """Some runs raised while the others completed (``summary`` records which and why), or the
     campaign's ``summary.json`` could not be written."""
 
-    def __init__(self, summary: dict[str, Any], reason: str | None = None) -> None:
+    def __init__(self, summary: CampaignSummary, reason: str | None = None) -> None:
         super().__init__(
             reason
             or f"{summary['runs_failed']} of {summary['runs_total']} runs raised (see summary.json)"
@@ -77,7 +76,7 @@ def run_campaign(
     address: str | None = None,
     console: Console | None = None,
     only: Sequence[str] = (),
-) -> dict[str, Any]:
+) -> CampaignSummary:
     """Execute every run of ``config`` into the campaign directory ``out``, or finish it.
 
     Runs execute in separate processes even with ``workers=1`` (one worker), so that a run that

@@ -9,11 +9,18 @@ import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
+from hazardhunt.campaign.store import (
+    CampaignSummary,
+    LedgerEntry,
+    RunSummary,
+    campaign_totals,
+    find_damage,
+    write_json_atomic,
+)
 
 
 @dataclass(frozen=True)
@@ -21,7 +28,7 @@ class RunOutcome:
     """How one run of a campaign ended: its summary, or the error it raised."""
 
     config: RunConfig
-    summary: dict[str, Any] | None
+    summary: RunSummary | None
     error: str | None = None
     """``Type: message`` of the exception, when the run raised."""
     traceback: str | None = None
@@ -50,7 +57,7 @@ class Ledger:
     def __init__(self, config: CampaignConfig, runs: list[RunConfig], out: Path) -> None:
         self.config = config
         self.path = out / "summary.json"
-        self.entries: dict[str, dict[str, Any]] = {}
+        self.entries: dict[str, LedgerEntry] = {}
         self.damaged: dict[str, str] = {}
         """Run id -> what is wrong with its files."""
         self.write_error: OSError | None = None
@@ -61,12 +68,12 @@ class Ledger:
                 damage = find_damage(directory)
                 if damage is None:
                     stored = json.loads((directory / "summary.json").read_text())
-                    self.entries[run.run_id] = {"status": "complete"} | _ledger_entry(stored)
+                    self.entries[run.run_id] = _ledger_entry(stored, "complete")
                     continue
                 self.damaged[run.run_id] = damage
             elif directory.exists():
                 raise ConfigError(f"{directory}: not a complete run; delete it to redo the run")
-            self.entries[run.run_id] = {"status": "pending"} | _run_keys(run)
+            self.entries[run.run_id] = _run_keys(run, "pending")
         self.write()
 
     def status(self, run: RunConfig) -> str:
@@ -77,26 +84,26 @@ class Ledger:
         """Store how a run ended and rewrite ``summary.json``."""
         run = outcome.config
         if outcome.summary is not None:
-            entry = {"status": "complete"} | _ledger_entry(outcome.summary)
+            entry = _ledger_entry(outcome.summary, "complete")
             if outcome.ray_node is not None:
                 entry["ray_node"] = outcome.ray_node
         else:
-            failure = {"error": outcome.error, "traceback": outcome.traceback}
-            entry = {"status": "failed"} | _run_keys(run) | failure
+            entry = _run_keys(run, "failed")
+            entry["error"], entry["traceback"] = outcome.error, outcome.traceback
         self.entries[run.run_id] = entry
         self.write()
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> CampaignSummary:
         """The campaign summary: totals, then one entry per run in grid order."""
         entries = list(self.entries.values())
-        return {
-            "campaign": self.config.model_dump(mode="json"),
+        return CampaignSummary(
+            campaign=self.config.model_dump(mode="json"),
             **campaign_totals(entries),
-            "updated_at": datetime.now(timezone.utc).isoformat(),
-            "runs": entries,
-        }
+            updated_at=datetime.now(timezone.utc).isoformat(),
+            runs=entries,
+        )
 
-    def write(self) -> dict[str, Any]:
+    def write(self) -> CampaignSummary:
         """Rewrite ``summary.json`` atomically; the summary meant to be written.
 
         A write that fails (a full disk) is remembered in ``write_error`` rather than raised:
@@ -112,16 +119,20 @@ class Ledger:
         return summary
 
 
-def _ledger_entry(summary: dict[str, Any]) -> dict[str, Any]:
-    """A run's summary as the ledger keeps it: without the checksums of its files."""
-    return {key: value for key, value in summary.items() if key != "checksums"}
+def _ledger_entry(summary: RunSummary, status: str) -> LedgerEntry:
+    """A run's summary as the ledger keeps it: with its status, without its files' checksums."""
+    entry = cast(LedgerEntry, {"status": status, **summary})
+    entry.pop("checksums", None)
+    return entry
 
 
-def _run_keys(run: RunConfig) -> dict[str, Any]:
-    return {
-        "run_id": run.run_id,
-        "scenario": run.scenario,
-        "field": run.field,
-        "tester": run.tester,
-        "seed": run.seed,
-    }
+def _run_keys(run: RunConfig, status: str) -> LedgerEntry:
+    """The entry of a run that has no summary (pending or failed)."""
+    return LedgerEntry(
+        status=status,
+        run_id=run.run_id,
+        scenario=run.scenario,
+        field=run.field,
+        tester=run.tester,
+        seed=run.seed,
+    )

@@ -17,11 +17,11 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.context import SpawnContext, SpawnProcess
 from pathlib import Path
-from typing import Any
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import RunOutcome, failed
 from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial_directory
+from hazardhunt.campaign.store import RunSummary
 from hazardhunt.errors import HazardhuntError
 
 PROGRESS_INTERVAL_S = 0.5
@@ -225,7 +225,7 @@ def _initialize_worker(campaign_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> dict[str, Any]:
+def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> RunSummary:
     """Execute ``run`` into its partial directory and rename it into place once complete,
     reporting its progress over ``connection``."""
     reporter = _progress_reporter(run.run_id, connection)

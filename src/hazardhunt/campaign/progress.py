@@ -9,7 +9,6 @@ import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -18,6 +17,7 @@ from rich.table import Table
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
+from hazardhunt.campaign.store import CampaignSummary, LedgerEntry
 
 LOG_INTERVAL_S = 600.0
 """Time between two progress lines when the campaign's output is not a terminal (a log file,
@@ -118,10 +118,10 @@ def shown_scenario(scenario: str) -> str:
     return path.name
 
 
-def print_campaign_table(console: Console, summary: dict[str, Any], out: Path) -> None:
+def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) -> None:
     """Per scenario x field x tester: failures of the run, or over seeds their mean ± std, and
     the mean wall time."""
-    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+    groups: dict[tuple[str, str, str], list[LedgerEntry]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
         groups.setdefault(key, []).append(entry)

@@ -16,7 +16,7 @@ from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import RunOutcome, failed
 from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, OnOutcome
 from hazardhunt.campaign.run import is_finished, partial_directory, record_run
-from hazardhunt.campaign.store import find_damage
+from hazardhunt.campaign.store import RunSummary, find_damage
 
 
 def execute_on_ray(
@@ -84,7 +84,7 @@ def _run_packed(run: RunConfig) -> tuple[bytes, str]:
         return buffer.getvalue(), node
 
 
-def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
+def _unpack(archive: bytes, final: Path) -> RunSummary:
     """Unpack a run's archive into its partial directory, rename it into place; its summary.
 
     Raises:
@@ -110,5 +110,5 @@ def _unpack(archive: bytes, final: Path) -> dict[str, Any]:
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise
-    summary: dict[str, Any] = json.loads((final / "summary.json").read_text())
+    summary: RunSummary = json.loads((final / "summary.json").read_text())
     return summary

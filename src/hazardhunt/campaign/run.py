@@ -22,7 +22,6 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from rich.console import Console
@@ -46,7 +45,13 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
-from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
+from hazardhunt.campaign.store import (
+    RunStore,
+    RunSummary,
+    file_checksums,
+    find_damage,
+    write_json_atomic,
+)
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError, PluginError
 from hazardhunt.sim.simulation import PeriodError, Simulation
@@ -156,7 +161,7 @@ def make_run_tester(config: RunConfig) -> Tester:
 
 def record_run(
     config: RunConfig, directory: Path, progress: ProgressCallback | None = None
-) -> dict[str, Any]:
+) -> RunSummary:
     """Run ``config`` and write its results into ``directory`` (created; must not exist).
 
     ``progress`` hears when the episodes start and after each of them.
@@ -223,7 +228,7 @@ def record_run(
 
 def _run_summary(
     config: RunConfig, store: RunStore, field: FieldShape, wall_time: float, started_at: str
-) -> dict[str, Any]:
+) -> RunSummary:
     """What ``summary.json`` says of a finished run."""
     classifier = store.classifier
     outcomes = [row["outcome"] for row in store.episodes]
@@ -235,7 +240,12 @@ def _run_summary(
         "seed": config.seed,
         "source_digest": hazardhunt.source_digest(),
         "episodes": len(outcomes),
-        **{f"{outcome}s": outcomes.count(outcome) for outcome in _OUTCOME_COUNTS},
+        "failures": outcomes.count("failure"),
+        "safe_contacts": outcomes.count("safe_contact"),
+        "stalls": outcomes.count("stall"),
+        "timeouts": outcomes.count("timeout"),
+        "goals": outcomes.count("goal"),
+        "sut_errors": outcomes.count("sut_error"),
         "first_failure_episode": next(
             (i for i, outcome in enumerate(outcomes) if outcome == "failure"), None
         ),
@@ -250,10 +260,6 @@ def _run_summary(
         "started_at": started_at,
         "finished_at": datetime.now(timezone.utc).isoformat(),
     }
-
-
-_OUTCOME_COUNTS = ("failure", "safe_contact", "stall", "timeout", "goal", "sut_error")
-"""Outcomes the run summary counts, each as ``<outcome>s``."""
 
 
 class RunFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
@@ -297,7 +303,7 @@ def partial_directory(out: Path) -> Path:
 
 def execute_run_atomically(
     config: RunConfig, out: Path, progress: ProgressCallback | None = None
-) -> dict[str, Any]:
+) -> RunSummary:
     """Execute ``config`` into the hidden partial sibling of ``out`` (discarding any leftover
     there) and rename it to ``out`` once complete; the run's summary.
 
@@ -322,7 +328,7 @@ def execute_run_atomically(
     return summary
 
 
-def execute_run(config: RunConfig, out: Path, console: Console | None = None) -> dict[str, Any]:
+def execute_run(config: RunConfig, out: Path, console: Console | None = None) -> RunSummary:
     """Execute ``config`` into ``out``, which appears only once the run is complete.
 
     A complete run already in ``out`` with the same configuration is kept and its summary
@@ -354,7 +360,7 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
         return _with_progress(config, out, console)
 
 
-def _finished_run(config: RunConfig, out: Path, console: Console | None) -> dict[str, Any] | None:
+def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunSummary | None:
     """The summary of the run of ``config`` complete in ``out``; None, having removed it, if
     it is damaged.
 
@@ -381,11 +387,11 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> dict
         return None
     if console is not None:
         console.print(f"{out}: already complete")
-    summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
+    summary: RunSummary = json.loads((out / "summary.json").read_text())
     return summary
 
 
-def _with_progress(config: RunConfig, out: Path, console: Console) -> dict[str, Any]:
+def _with_progress(config: RunConfig, out: Path, console: Console) -> RunSummary:
     columns = (
         TextColumn(f"{config.run_id}"),
         BarColumn(),

@@ -26,7 +26,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import pandas as pd
 import pyarrow.parquet as pq
@@ -155,6 +155,81 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+class FirstSutError(TypedDict):
+    """The first episode of a run that ended in ``sut_error``, and what the SUT did."""
+
+    episode: int
+    error: str
+
+
+class RunSummary(TypedDict, total=False):
+    """A run's ``summary.json`` (:func:`hazardhunt.campaign.run.record_run` writes every key;
+    runs recorded by earlier versions may lack the later ones)."""
+
+    run_id: str
+    scenario: str
+    field: str
+    tester: str
+    seed: int
+    source_digest: str
+    episodes: int
+    failures: int
+    safe_contacts: int
+    stalls: int
+    timeouts: int
+    goals: int
+    sut_errors: int
+    first_failure_episode: int | None
+    first_sut_error: FirstSutError | None
+    field_shape: dict[str, Any]
+    classifier: str
+    classes: list[str]
+    classes_found: int
+    classes_total: int
+    wall_time_s: float
+    episodes_per_s: float
+    started_at: str
+    finished_at: str
+    checksums: dict[str, str]
+    """The SHA-256 of every other file of the run."""
+    left_out: list[str]
+    """Folders a copy left out (``trajectories``)."""
+
+
+class LedgerEntry(RunSummary, total=False):
+    """A run as a campaign's ``summary.json`` lists it: its summary (without checksums) once
+    complete, else its keys; and how it stands."""
+
+    status: str
+    """``complete``, ``failed`` or ``pending``."""
+    error: str | None
+    """``Type: message`` of what a failed run raised."""
+    traceback: str | None
+    ray_node: str
+    """The Ray node that executed the run (the ``ray`` executor only)."""
+
+
+class CampaignTotals(TypedDict):
+    """A campaign's counts over its runs."""
+
+    runs_total: int
+    runs_complete: int
+    runs_failed: int
+    runs_pending: int
+    episodes: int
+    failures: int
+    sut_errors: int
+
+
+class CampaignSummary(CampaignTotals):
+    """A campaign's ``summary.json``."""
+
+    campaign: dict[str, Any]
+    """The campaign's configuration."""
+    updated_at: str
+    runs: list[LedgerEntry]
+
+
 class RunStore:
     """Collects a run's episodes and failures and writes them as Parquet."""
 
@@ -184,7 +259,7 @@ class RunStore:
         self.failures: list[dict[str, Any]] = []
         self.sut_error_count = 0
         """Episodes stored so far that ended in ``sut_error``."""
-        self.first_sut_error: dict[str, Any] | None = None
+        self.first_sut_error: FirstSutError | None = None
         """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
@@ -287,7 +362,7 @@ def left_out(directory: Path) -> list[str]:
     return [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
 
 
-def campaign_totals(entries: list[dict[str, Any]]) -> dict[str, int]:
+def campaign_totals(entries: list[LedgerEntry]) -> CampaignTotals:
     """A campaign summary's counts from its run entries: the runs by status, and the episodes,
     failures and SUT errors of the complete ones."""
     complete = [e for e in entries if e["status"] == "complete"]
@@ -296,8 +371,8 @@ def campaign_totals(entries: list[dict[str, Any]]) -> dict[str, int]:
         "runs_complete": len(complete),
         "runs_failed": sum(e["status"] == "failed" for e in entries),
         "runs_pending": sum(e["status"] == "pending" for e in entries),
-        "episodes": sum(e["episodes"] for e in complete),
-        "failures": sum(e["failures"] for e in complete),
+        "episodes": sum(e.get("episodes", 0) for e in complete),
+        "failures": sum(e.get("failures", 0) for e in complete),
         "sut_errors": sum(e.get("sut_errors", 0) for e in complete),
     }
 
