@@ -1,6 +1,7 @@
 """Failures as regression cases: export from a run, re-run against the same and a changed SUT."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -300,3 +301,23 @@ def test_regress_imports_a_case_plug_in_when_allowed_and_says_which(tmp_path, op
     assert marker.exists()
     [result] = json.loads(done.stdout)["cases"]
     assert result["outcome"] != "sut_error"
+
+
+@pytest.mark.parametrize("run_id", ["../../../../ESCAPED", "/tmp/ABSOLUTE"])
+def test_a_received_run_id_never_takes_export_outside_its_folder(run, tmp_path, run_id):
+    from hazardhunt.campaign.store import file_checksums
+
+    received = tmp_path / "deep" / "er" / "still" / "received"
+    shutil.copytree(run, received)
+    summary_file = received / "summary.json"
+    summary = json.loads(summary_file.read_text())
+    summary["run_id"] = run_id
+    summary["checksums"] = file_checksums(received)  # as a careful forger would
+    summary_file.write_text(json.dumps(summary))
+    out = tmp_path / "deep" / "er" / "still" / "cases"
+    done = hazardhunt("export", received, "--out", out)
+    assert done.returncode == 0, done.stderr
+    written = sorted(p for p in tmp_path.rglob("*.toml"))
+    assert written
+    assert all(path.parent == out for path in written)
+    assert not list(Path("/tmp").glob("ABSOLUTE*"))

@@ -35,7 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.config import EnvOptions, file_name
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
@@ -192,6 +192,8 @@ def export_cases(
             configs[run_id] = load_run_config(results.run_directory(run_id))
         case = _case(row, configs[run_id], classifier or configs[run_id].classifier)
         path = out / f"{case['name']}.toml"
+        if path.resolve().parent != out.resolve():  # file_name keeps it there; never write out
+            raise CaseError(f"{case['name']!r}: not a case file name inside {out}")
         header = (
             f"# A failure hazardhunt found, as a regression case: {case['expected']['class']}\n"
             f"# Re-run it with: hazardhunt regress {path.name}\n"
@@ -205,7 +207,8 @@ def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[st
     """The contents of one case file, its class given by ``classifier`` (None: the built-in
     one)."""
     failure_class = str(row.get("class", "other"))
-    name = f"{row['run_id']}__episode{int(row['episode'])}"
+    # The run id comes from a run's files, which anyone may have made: one safe file name.
+    name = file_name(f"{row['run_id']}__episode{int(row['episode'])}")
     sut: dict[str, Any] = {}
     for key in ("controller", "safety_layer"):
         spec: PluginSpec | None = getattr(config, key)
