@@ -143,3 +143,27 @@ def test_a_single_run_copies_and_copies_again_as_already_there(
     assert not (tmp_path / "run" / "trajectories").exists()
     again = hazardhunt("copy", run, "--out", tmp_path / "run")
     assert "0 run(s) copied, 1 already there" in again.stdout
+
+
+def test_a_received_run_with_a_symbolic_link_is_not_copied_nor_followed(
+    campaign: Path, tmp_path: Path
+) -> None:
+    secret = tmp_path / "home" / ".ssh"
+    secret.mkdir(parents=True)
+    (secret / "id_ed25519").write_text("PRIVATE KEY")
+    run = next(p for p in (campaign / "runs").iterdir() if p.is_dir())
+    received = tmp_path / "received"
+    shutil.copytree(run, received)
+    shutil.rmtree(received / "tester")
+    (received / "tester").symlink_to(secret)
+    summary = json.loads((received / "summary.json").read_text())
+    del summary["checksums"]  # as for a run recorded before checksums
+    (received / "summary.json").write_text(json.dumps(summary))
+    kept = tmp_path / "kept"
+    done = hazardhunt("copy", received, "--out", kept)
+    assert done.returncode == 2
+    assert "tester is a symbolic link" in done.stderr
+    assert not kept.exists() or not list(kept.rglob("id_ed25519"))
+    assert find_damage(received) == (
+        "tester is a symbolic link (a run holds none; it is not followed)"
+    )

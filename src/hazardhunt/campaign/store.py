@@ -104,8 +104,12 @@ def find_damage(directory: Path) -> str | None:
     """What is wrong with the files of a finished run directory; None if they are as written.
 
     A run whose ``summary.json`` records checksums must match them; a run recorded before
-    checksums were must have tables that read back.
+    checksums were must have tables that read back. A run holds no symbolic link: one found is
+    damage, and nothing reads or copies through it.
     """
+    link = symbolic_link_in(directory)
+    if link is not None:
+        return f"{link} is a symbolic link (a run holds none; it is not followed)"
     try:
         summary = json.loads((directory / "summary.json").read_bytes())
     except (OSError, ValueError) as error:
@@ -119,6 +123,8 @@ def find_damage(directory: Path) -> str | None:
         return "summary.json: checksums is not a table of files"
     left_out = summary.get(LEFT_OUT_KEY, [])
     for name, digest in recorded.items():
+        if Path(name).is_absolute() or ".." in Path(name).parts:
+            return f"summary.json: checksums name {name!r}, outside the run"
         path = directory / name
         if name.partition("/")[0] in left_out and not path.exists():
             continue
@@ -126,6 +132,16 @@ def find_damage(directory: Path) -> str | None:
             return f"{name} is missing"
         if _sha256(path) != digest:
             return f"{name} does not match its checksum (changed or truncated)"
+    return None
+
+
+def symbolic_link_in(directory: Path) -> str | None:
+    """The first symbolic link inside ``directory`` (relative to it), not following any."""
+    for root, folders, files in os.walk(directory, followlinks=False):
+        for name in sorted([*folders, *files]):
+            path = Path(root) / name
+            if path.is_symlink():
+                return str(path.relative_to(directory))
     return None
 
 
@@ -384,15 +400,24 @@ def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -
     and lists what was left out.
 
     Raises:
-        ValueError: ``leave_out`` names a folder outside :data:`LEAVABLE`.
+        ValueError: ``leave_out`` names a folder outside :data:`LEAVABLE`, or ``source`` holds
+            a symbolic link.
     """
     unknown = set(leave_out) - set(LEAVABLE)
     if unknown:
         raise ValueError(f"only {', '.join(LEAVABLE)} can be left out, not {sorted(unknown)}")
+    link = symbolic_link_in(source)
+    if link is not None:
+        raise ValueError(f"{source}: {link} is a symbolic link; a run holds none: nothing copied")
     partial = destination.with_name(f".{destination.name}.partial")
     shutil.rmtree(partial, ignore_errors=True)
     try:
-        shutil.copytree(source, partial, ignore=shutil.ignore_patterns(*leave_out, "summary.json"))
+        shutil.copytree(
+            source,
+            partial,
+            ignore=shutil.ignore_patterns(*leave_out, "summary.json"),
+            symlinks=True,  # never followed (there are none: checked above)
+        )
         summary = json.loads((source / "summary.json").read_bytes())
         already = [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
         summary[LEFT_OUT_KEY] = sorted(set(already) | set(leave_out))
