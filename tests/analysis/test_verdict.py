@@ -88,5 +88,8 @@ def test_the_regression_commands_export_then_regress_the_cases():
         "hazardhunt export 'results/my demo' --out 'results/my demo/cases'",
         "hazardhunt regress 'results/my demo/cases'",
     ]
-    commands = verdict.regression_commands(Path("results/demo"), plugins=True)
-    assert commands[1] == "hazardhunt regress results/demo/cases --trust-plugins"
+    commands = verdict.regression_commands(
+        Path("results/demo"), {"--controller": ["os:system"], "--safety-layer": []}
+    )
+    assert commands[1] == "hazardhunt regress results/demo/cases --controller os:system"
+    assert not any("--trust-plugins" in command for command in commands)

@@ -130,6 +130,11 @@ def test_reporting_and_exporting_a_received_run_imports_nothing(received):
     assert report.returncode == 0, report.stderr
     representatives = pd.read_csv(run / "report" / "tables" / "representatives.csv")
     assert set(representatives["pictures"]) == {"drawn as recorded"}
+    # Its advice never trusts the run's plug-ins wholesale, and names what would be imported.
+    page = (run / "report" / "index.html").read_text()
+    assert "--trust-plugins" not in page
+    assert "--controller os:system" in page
+    assert "Read that code before you run regress with it" in page
     for name in representatives["class"]:  # drawn from the record: no SUT is built
         stem = run / "report" / "figures" / f"class_{name.replace('/', '_')}"
         assert stem.with_suffix(".png").is_file()

@@ -643,13 +643,28 @@ def _worst_facts(worst: pd.Series) -> str:
 
 
 def _regression_commands(section: Section, results: Results) -> None:
-    plugins = any(
-        names_sut_plugins(load_run_config(Path(directory)))
-        for directory in results.runs["directory"]
-    )
+    plugins: dict[str, list[str]] = {"--controller": [], "--safety-layer": []}
+    for directory in results.runs["directory"]:
+        config = load_run_config(Path(directory))
+        for option, spec in (
+            ("--controller", config.controller),
+            ("--safety-layer", config.safety_layer),
+        ):
+            if spec is not None and spec.path not in plugins[option]:
+                plugins[option].append(spec.path)
     commands = verdict.regression_commands(results.directory, plugins)
     section.blocks.append(Heading("Keep them as regression cases"))
     section.blocks.append(Commands(tuple(commands)))
+    named = [f"{option} {path}" for option, paths in plugins.items() for path in paths]
+    if named:
+        section.blocks.append(
+            Text(
+                f"The runs name plug-ins ({'; '.join(named)}): code from the results, which "
+                "hazardhunt imports only because the command names it. Read that code before "
+                "you run regress with it, or name your own.",
+                "warning",
+            )
+        )
     section.blocks.append(
         Text(
             "export writes one case file per class, scenario and field (--all: one per failure; "

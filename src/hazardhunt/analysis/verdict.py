@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shlex
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,13 +143,21 @@ def _episode_arms(path: Path) -> dict[int, str]:
         return {}
 
 
-def regression_commands(directory: Path, plugins: bool) -> list[str]:
-    """The commands that turn a campaign's failures into regression cases and re-run them;
-    ``plugins``: some run's controller or safety layer is a plug-in, which ``regress`` imports
-    only when told to."""
+def regression_commands(
+    directory: Path, plugins: Mapping[str, Sequence[str]] | None = None
+) -> list[str]:
+    """The commands that turn a campaign's failures into regression cases and re-run them.
+
+    ``plugins``: per option (``--controller``, ``--safety-layer``) the plug-ins the runs name
+    (code in results, which ``regress`` imports only when told to). The ``regress`` command
+    names the first of each, so that what it would import stands on the line: never a blanket
+    ``--trust-plugins``.
+    """
     cases = directory / "cases"
-    trust = " --trust-plugins" if plugins else ""
+    named = "".join(
+        f" {option} {shlex.quote(paths[0])}" for option, paths in (plugins or {}).items() if paths
+    )
     return [
         f"hazardhunt export {shlex.quote(str(directory))} --out {shlex.quote(str(cases))}",
-        f"hazardhunt regress {shlex.quote(str(cases))}{trust}",
+        f"hazardhunt regress {shlex.quote(str(cases))}{named}",
     ]
