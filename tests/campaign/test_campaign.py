@@ -609,3 +609,40 @@ def test_the_table_shows_a_scenario_file_relative_to_where_the_user_is(
     assert shown_scenario(str(tmp_path / "floors" / "mine.toml")) == "floors/mine.toml"
     assert shown_scenario("/elsewhere/theirs.toml") == "theirs.toml"
     assert shown_scenario("crossing") == "crossing"
+
+
+def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted(
+    campaign_file: Path, reference: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "campaign"
+    shutil.copytree(reference, out)
+    run_id = "head-on__2m__random__seed1"
+    stranger = tmp_path / "stranger"
+    made = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
+        "--episodes", EPISODES, "--seed", 3, "--out", stranger,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    shutil.rmtree(out / "runs" / run_id)
+    shutil.copytree(stranger, out / "runs" / run_id)
+    unfinished = "overtaking__2m__random__seed0"
+    (out / "runs" / unfinished / "summary.json").unlink()
+    result = hazardhunt("campaign", campaign_file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert f"run {run_id} is damaged (it holds a run of another configuration " in result.stdout
+    assert f"run {unfinished} is damaged (it holds no summary.json" in result.stdout
+    assert_same_runs(out, reference)
+    rows = json.loads((out / "summary.json").read_text())["runs"]
+    assert {(row["run_id"], row["scenario"]) for row in rows if row["run_id"] == run_id} == {
+        (run_id, "head-on")
+    }
+
+
+def test_run_refuses_to_write_into_a_campaign_s_run_folder(reference: Path) -> None:
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
+        "--episodes", EPISODES, "--out", reference / "runs" / "head-on__2m__random__seed0",
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "a run folder of the campaign in" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1

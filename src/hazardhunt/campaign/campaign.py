@@ -173,7 +173,8 @@ def selected_runs(runs: list[RunConfig], only: Sequence[str]) -> list[RunConfig]
 
 
 def _redo_damaged(ledger: Ledger, runs_directory: Path, console: Console | None) -> None:
-    """Remove the finished runs whose files are damaged, so that they are run again."""
+    """Remove the run folders that are damaged, of another configuration or unfinished, so that
+    they are run again."""
     for run_id, damage in ledger.damaged.items():
         if console is not None:
             console.print(

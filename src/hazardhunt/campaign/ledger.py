@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import cast
 
-from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
+from hazardhunt.campaign.config import CampaignConfig, RunConfig
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
     CampaignSummary,
@@ -51,7 +51,9 @@ class Ledger:
 
     Complete runs are read back from their own directories, so the ledger of a resumed campaign
     is right even if the previous campaign process died between a run and its ledger update. A
-    finished run whose files do not match its checksums is ``damaged`` and pending.
+    run folder whose files do not match their checksums, that holds a run of another
+    configuration (another command wrote it) or no ``summary.json`` is ``damaged``: the campaign
+    names it and runs it again, and never counts it.
     """
 
     def __init__(self, config: CampaignConfig, runs: list[RunConfig], out: Path) -> None:
@@ -65,14 +67,14 @@ class Ledger:
         for run in runs:
             directory = out / "runs" / run.run_id
             if is_finished(directory):
-                damage = find_damage(directory)
+                damage = find_damage(directory) or _not_this_run(directory, run)
                 if damage is None:
                     stored = json.loads((directory / "summary.json").read_text())
                     self.entries[run.run_id] = _ledger_entry(stored, "complete")
                     continue
                 self.damaged[run.run_id] = damage
-            elif directory.exists():
-                raise ConfigError(f"{directory}: not a complete run; delete it to redo the run")
+            elif directory.exists():  # the campaign's own folder, without its summary.json
+                self.damaged[run.run_id] = "it holds no summary.json (an unfinished run)"
             self.entries[run.run_id] = _run_keys(run, "pending")
         self.write()
 
@@ -117,6 +119,24 @@ class Ledger:
         else:
             self.write_error = None
         return summary
+
+
+def _not_this_run(directory: Path, run: RunConfig) -> str | None:
+    """Why the finished run in ``directory`` is not ``run`` (another configuration), if it is
+    not."""
+    try:
+        stored = RunConfig.model_validate(
+            json.loads((directory / "config.json").read_text())["run"]
+        )
+    except (OSError, ValueError, KeyError, TypeError):
+        return "its config.json does not read as a run's configuration"
+    if stored == run:
+        return None
+    mine, theirs = run.model_dump(mode="json"), stored.model_dump(mode="json")
+    key = next(k for k in mine if mine[k] != theirs.get(k))
+    return (
+        f"it holds a run of another configuration ({key}: {theirs.get(key)!r}, not {mine[key]!r})"
+    )
 
 
 def _ledger_entry(summary: RunSummary, status: str) -> LedgerEntry:

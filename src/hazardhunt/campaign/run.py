@@ -343,11 +343,17 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
 
     Raises:
         ConfigError: ``out`` holds something else, or a run of another configuration, or
-            another process is writing it.
+            another process is writing it, or it is a run folder of a campaign.
         PluginError: A plug-in of the SUT fails on a trial episode (:func:`check_sut`).
         RunFailed: The run could not write its results, or tested nothing (``NothingTested``);
             nothing of it is left.
     """
+    campaign = out.absolute().parent.parent
+    if out.absolute().parent.name == "runs" and (campaign / "campaign.json").is_file():
+        raise ConfigError(
+            f"{out}: a run folder of the campaign in {campaign}, which writes its runs itself; "
+            "run the campaign, or choose another --out"
+        )
     check_sut(config)
     out.parent.mkdir(parents=True, exist_ok=True)
     with exclusive_lock(out.parent / f".{out.name}.lock", out, "run"):
