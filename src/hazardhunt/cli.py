@@ -732,6 +732,14 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             f"{escape(first['error'])}",
             highlight=False,
         )
+    faulty = summary.get("first_classifier_error")
+    if faulty is not None:
+        console.print(
+            f"[red]warning: the failure classifier failed on {summary['classifier_errors']} "
+            f"failures[/red] (recorded as other); the first, episode {faulty['episode']}: "
+            f"{escape(faulty['error'])}",
+            highlight=False,
+        )
     console.print(f"results in [bold]{out.resolve()}[/bold]")
 
 

@@ -250,6 +250,8 @@ def _run_summary(
             (i for i, outcome in enumerate(outcomes) if outcome == "failure"), None
         ),
         "first_sut_error": store.first_sut_error,
+        "classifier_errors": store.classifier_errors,
+        "first_classifier_error": store.first_classifier_error,
         "field_shape": asdict(field),
         "classifier": classifier.name,
         "classes": store.classes,

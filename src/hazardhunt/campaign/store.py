@@ -25,6 +25,7 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypedDict
 
@@ -38,8 +39,9 @@ from hazardhunt.spec.episode import (
     EpisodeSummary,
     TrajectorySample,
 )
-from hazardhunt.spec.failure_classes import FailureClassifier
+from hazardhunt.spec.failure_classes import OTHER, FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
+from hazardhunt.sut.guard import is_plugin_fault
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.base import EpisodeRecord
 
@@ -195,6 +197,9 @@ class RunSummary(TypedDict, total=False):
     timeouts: int
     goals: int
     sut_errors: int
+    classifier_errors: int
+    """Failures the classifier raised on or named no class for (recorded as ``other``)."""
+    first_classifier_error: FirstSutError | None
     first_failure_episode: int | None
     first_sut_error: FirstSutError | None
     field_shape: dict[str, Any]
@@ -276,6 +281,9 @@ class RunStore:
         self.sut_error_count = 0
         """Episodes stored so far that ended in ``sut_error``."""
         self.first_sut_error: FirstSutError | None = None
+        self.classifier_errors = 0
+        """Failures the classifier raised on or gave no class name for (recorded as ``other``)."""
+        self.first_classifier_error: FirstSutError | None = None
         """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
@@ -310,7 +318,7 @@ class RunStore:
             {
                 **replay,
                 **{key: row[key] for key in FAILURE_SUMMARY_COLUMNS},
-                "class": self.classifier.classify(trajectory, summary, self.field),
+                "class": self._classify(episode, trajectory, summary),
                 "contact_x": None if contact is None else contact.human_x,
                 "contact_y": None if contact is None else contact.human_y,
                 "actions": result.actions.tolist(),
@@ -320,6 +328,26 @@ class RunStore:
         self._buffered_failures += 1
         if self._buffered_failures >= TRAJECTORY_FLUSH:
             self._flush_trajectories()
+
+    def _classify(
+        self, episode: int, trajectory: Sequence[TrajectorySample], summary: EpisodeSummary
+    ) -> str:
+        """The failure's class; ``other`` (counted, the first error kept) when the classifier
+        raises or returns anything but a class name: a plug-in's fault costs the failure its
+        class, not the run."""
+        try:
+            name = self.classifier.classify(trajectory, summary, self.field)
+            if not isinstance(name, str):
+                raise TypeError(f"classify() returned {name!r}, not a class name (str)")
+        except BaseException as error:  # a plug-in may raise anything
+            if not is_plugin_fault(error):
+                raise
+            self.classifier_errors += 1
+            if self.first_classifier_error is None:
+                what = f"{type(error).__name__}: {error}"
+                self.first_classifier_error = {"episode": episode, "error": what}
+            return OTHER
+        return name
 
     @property
     def failure_count(self) -> int:

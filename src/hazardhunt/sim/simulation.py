@@ -40,6 +40,7 @@ from hazardhunt.sut.guard import (
     checked_command,
     checked_status,
     is_finite_number,
+    is_plugin_fault,
 )
 from hazardhunt.sut.protocols import ControlCommand, Controller, SafetyLayer, SafetyStatus
 from hazardhunt.sut.route import Route, RoutePlanningError, scenario_route
@@ -304,7 +305,9 @@ class Simulation:
         self._call_safety = self._time_limit.bound("update()", self.safety_layer.update)
         try:
             self._time_limit.call("the safety layer's reset()", self.safety_layer.reset)
-        except Exception as error:
+        except BaseException as error:  # a plug-in may raise anything, SystemExit too
+            if not is_plugin_fault(error):
+                raise
             counts.safety_layer_errors.append(f"reset() raised {_named(error)}")
             self._sut_error = True
         try:
@@ -316,7 +319,9 @@ class Simulation:
                 self.robot,
                 self.robot_params,
             )
-        except Exception as error:
+        except BaseException as error:  # a plug-in may raise anything, SystemExit too
+            if not is_plugin_fault(error):
+                raise
             counts.controller_errors.append(f"reset() raised {_named(error)}")
             self._command = ControlCommand(
                 speed=0.0, yaw_rate=0.0, failed=True, status=f"reset {_status(error)}"
@@ -445,7 +450,9 @@ class Simulation:
             status = checked_status(
                 self._call_safety(now, self.robot, self.human_position, self.human_params.radius)
             )
-        except Exception as error:
+        except BaseException as error:  # a plug-in may raise anything, SystemExit too
+            if not is_plugin_fault(error):
+                raise
             self._counts.safety_layer_errors.append(_named(error))
             self._sut_error = True
             status = SafetyStatus(self.emergency_stop, self.human_in_field)
@@ -529,7 +536,9 @@ class Simulation:
         counts.controller_calls += 1
         try:
             command = checked_command(self._call_control(now, self.robot, tracked))
-        except Exception as error:
+        except BaseException as error:  # a plug-in may raise anything, SystemExit too
+            if not is_plugin_fault(error):
+                raise
             command = ControlCommand(speed=0.0, yaw_rate=0.0, failed=True, status=_status(error))
             counts.controller_errors.append(_named(error))
             self._sut_error = True

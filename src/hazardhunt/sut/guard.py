@@ -231,6 +231,13 @@ class TimeLimit:
         return False
 
 
+def is_plugin_fault(error: BaseException) -> bool:
+    """Whether ``error``, raised out of a plug-in's call, is the plug-in's to record (any
+    exception, ``SystemExit`` and any other ``BaseException`` included), rather than the user's
+    Ctrl-C (``KeyboardInterrupt``) or the interpreter's own ``GeneratorExit``."""
+    return not isinstance(error, (KeyboardInterrupt, GeneratorExit, _Alarm))
+
+
 def _interruptible(seconds: float, function: Callable[..., T], args: tuple[Any, ...]) -> T:
     """``function(*args)`` under a SIGALRM timer of ``seconds``; raises _Alarm when it goes off,
     also when the function caught the interruption and returned or raised something else."""

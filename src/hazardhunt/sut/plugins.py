@@ -26,6 +26,7 @@ from typing import Any
 
 from hazardhunt.errors import PluginError as PluginError
 from hazardhunt.sut.compat import ProtocolWarning, adapt_controller, adapt_safety_layer
+from hazardhunt.sut.guard import is_plugin_fault
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 
 MOVED_MODULES = {"hazardhunt.sut.conservative": "hazardhunt.benchmark.conservative"}
@@ -65,11 +66,13 @@ def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
                     f"{path!r}: module {module_name!r} has no attribute {attribute!r}"
                 ) from None
             raise _import_raised(path, module_name, error) from error
-        except Exception as error:  # the module itself raised while importing
+        except BaseException as error:  # the module itself raised while importing
+            if not is_plugin_fault(error):
+                raise
             raise _import_raised(path, module_name, error) from error
 
 
-def _import_raised(path: str, module_name: str, error: Exception) -> PluginError:
+def _import_raised(path: str, module_name: str, error: BaseException) -> PluginError:
     return PluginError(
         f"{path!r}: importing module {module_name!r} raised {type(error).__name__}: {error}"
     )
@@ -117,7 +120,9 @@ def build(
         pass
     try:
         plugin = factory(**params)
-    except Exception as error:
+    except BaseException as error:  # SystemExit included
+        if not is_plugin_fault(error):
+            raise
         raise PluginError(
             f"{path!r}: building the {kind} raised {type(error).__name__}: {error}"
         ) from error

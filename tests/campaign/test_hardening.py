@@ -1,0 +1,111 @@
+"""Plug-ins that exit, classifiers that misbehave, numbers no clock can hold, grids that name a
+run twice: each is an error that says why, or a recorded outcome, never a silent exit or a
+traceback."""
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from tests.helpers import hazardhunt
+
+HERE = "tests.campaign.test_hardening"
+ROOT = Path(__file__).parents[2]
+PURSUIT = "hazardhunt.sut.pursuit:PursuitController"
+
+
+class ExitingLayer:
+    """A safety layer that ends the process it runs in."""
+
+    def reset(self):
+        pass
+
+    def update(self, time_s, robot, human_position, radius):
+        raise SystemExit(0)
+
+
+class ExitingOnBuild:
+    """A controller whose constructor ends the process."""
+
+    control_period = 0.2
+
+    def __init__(self):
+        raise SystemExit(0)
+
+
+class NumberClassifier:
+    """Names every failure with a number."""
+
+    name = "numbers"
+
+    def classes_for(self, field):
+        return ("one", "other")
+
+    def classify(self, trajectory, summary, field):
+        return 1
+
+
+class RaisingClassifier(NumberClassifier):
+    def classify(self, trajectory, summary, field):
+        raise ValueError("no face")
+
+
+def run(tmp_path, *options, episodes=6):
+    return hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", episodes, "--out", tmp_path / "run", "--json", *options, cwd=ROOT,
+    )  # fmt: skip
+
+
+def test_a_safety_layer_that_exits_is_one_line_not_a_silent_exit(tmp_path):
+    done = run(tmp_path, "--safety-layer", f"{HERE}:ExitingLayer")
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr.strip() == (
+        f"error: safety layer '{HERE}:ExitingLayer': update() raised SystemExit: 0 (on a trial "
+        "episode before the run; nothing was run)"
+    )
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_controller_that_exits_while_built_is_one_line(tmp_path):
+    done = run(tmp_path, "--controller", f"{HERE}:ExitingOnBuild")
+    assert done.returncode == 2
+    assert "building the controller raised SystemExit: 0" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    ("classifier", "error"),
+    [
+        ("NumberClassifier", "TypeError: classify() returned 1, not a class name (str)"),
+        ("RaisingClassifier", "ValueError: no face"),
+    ],
+)
+def test_a_classifier_that_fails_costs_the_failure_its_class_not_the_run(
+    tmp_path, classifier, error
+):
+    done = run(
+        tmp_path, "--controller", PURSUIT, "--classifier", f"{HERE}:{classifier}", episodes=8
+    )
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["failures"] > 0
+    assert summary["classifier_errors"] == summary["failures"]
+    assert summary["first_classifier_error"]["error"] == error
+    failures = pd.read_parquet(tmp_path / "run" / "failures.parquet")
+    assert set(failures["class"]) == {"other"}
+    report = hazardhunt("report", tmp_path / "run")
+    assert report.returncode == 0, report.stderr
+
+
+def test_the_summary_table_says_the_classifier_failed(tmp_path):
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 8, "--out", tmp_path / "run", "--controller", PURSUIT,
+        "--classifier", f"{HERE}:RaisingClassifier", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "warning: the failure classifier failed on" in done.stdout
+    assert "ValueError: no face" in done.stdout
