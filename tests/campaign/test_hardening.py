@@ -109,3 +109,35 @@ def test_the_summary_table_says_the_classifier_failed(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "warning: the failure classifier failed on" in done.stdout
     assert "ValueError: no face" in done.stdout
+
+
+@pytest.mark.parametrize("timeout", ["1e10", "1e12"])
+def test_a_time_limit_no_timer_can_hold_is_refused_when_read(tmp_path, timeout):
+    done = run(tmp_path, "--controller", PURSUIT, "--controller-timeout", timeout)
+    assert done.returncode == 2
+    assert "controller_timeout" in done.stderr
+    assert "less than or equal to 86400" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("testers", '["random", "random"]'), ("fields", '["none", "2m", "none"]')],
+)
+def test_a_grid_that_names_a_run_twice_is_refused(tmp_path, key, value):
+    grid = {
+        "scenarios": '["head-on"]',
+        "fields": '["none"]',
+        "testers": '["random"]',
+        "seeds": "[0]",
+        "episodes": "2",
+    }
+    grid[key] = value
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text("".join(f"{k} = {v}\n" for k, v in grid.items()))
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "out")
+    assert done.returncode == 2
+    assert f"{key}: " in done.stderr
+    assert "is given twice" in done.stderr
+    assert not (tmp_path / "out").exists()

@@ -74,6 +74,9 @@ Seconds = Annotated[float, Strict(), Field(gt=0)]
 
 MAX_EPISODE_DURATION = 3600.0
 """The longest episode, in s of simulated time."""
+MAX_CONTROLLER_TIMEOUT = 86_400.0
+"""The longest time limit on one call of a plug-in, in s (a day): the timer cannot hold much
+more."""
 
 SutErrorLimit = Annotated[float, Strict(), Field(gt=0, le=1)]
 """The share of a run's episodes that, once they have ended in ``sut_error``, fails the run: a
@@ -93,9 +96,12 @@ class EnvOptions(_Strict):
     """Simulated time after which an episode times out, in s."""
     stall_duration: Seconds = 10.0
     """Continuous emergency-stop time after which an episode stalls, in s."""
-    controller_timeout: float | None = Field(default=None, gt=0, allow_inf_nan=False)
-    """Wall-clock limit on each call of the controller, in s: a call that exceeds it ends the
-    episode as ``sut_error``. None: no limit (a limit makes results depend on the machine)."""
+    controller_timeout: float | None = Field(
+        default=None, gt=0, le=MAX_CONTROLLER_TIMEOUT, allow_inf_nan=False
+    )
+    """Wall-clock limit on each call of the controller, in s (at most a day): a call that
+    exceeds it ends the episode as ``sut_error``. None: no limit (a limit makes results depend
+    on the machine)."""
     robot: RobotParams = RobotParams()
     """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
     controller receives them in ``reset``."""
@@ -392,6 +398,14 @@ class CampaignConfig(_Strict):
                     _check_tester(name)
                 except ValueError as error:
                     raise invalid((name,), str(error), name) from None
+        return values
+
+    @field_validator("scenarios", "fields", "testers")
+    @classmethod
+    def _distinct(cls, values: list[str]) -> list[str]:
+        repeated = sorted({value for value in values if values.count(value) > 1})
+        if repeated:
+            raise ValueError(f"must be distinct; {', '.join(map(repr, repeated))} is given twice")
         return values
 
     @field_validator("seeds")

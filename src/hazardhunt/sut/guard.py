@@ -183,10 +183,12 @@ class TimeLimit:
     """
 
     def __init__(self, seconds: float | None) -> None:
-        """Raises ValueError unless ``seconds`` is None or a positive, finite number."""
-        if seconds is not None and not (is_finite_number(seconds) and seconds > 0):
+        """Raises ValueError unless ``seconds`` is None or a positive number of seconds, at
+        most a day (the interval timer holds no more)."""
+        if seconds is not None and not (is_finite_number(seconds) and 0 < seconds <= 86_400):
             raise ValueError(
-                f"controller_timeout must be a positive number of seconds or None, not {seconds!r}"
+                "controller_timeout must be a positive number of seconds, at most a day "
+                f"(86400), or None, not {seconds!r}"
             )
         self.seconds = seconds
         self._warned = False
