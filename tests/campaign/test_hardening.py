@@ -2,7 +2,13 @@
 run twice: each is an error that says why, or a recorded outcome, never a silent exit or a
 traceback."""
 
+import contextlib
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -141,3 +147,35 @@ def test_a_grid_that_names_a_run_twice_is_refused(tmp_path, key, value):
     assert f"{key}: " in done.stderr
     assert "is given twice" in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux", reason="workers die with their parent on Linux")
+@pytest.mark.parametrize("tester", ["cem", "qd"])
+def test_a_killed_run_leaves_no_worker_process(tmp_path, tester):
+    from tests.campaign.test_campaign import live_processes_in_group
+
+    command = [
+        sys.executable, "-m", "hazardhunt.cli", "run", "--scenario", "head-on",
+        "--field", "none", "--tester", tester, "--tester-param", "workers=2",
+        "--episodes", "400", "--out", str(tmp_path / "run"), "--controller", PURSUIT,
+    ]  # fmt: skip
+    run = subprocess.Popen(
+        command, start_new_session=True, cwd=ROOT,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while len(live_processes_in_group(run.pid)) < 3:  # the run and its two workers
+            assert run.poll() is None, "the run ended before its workers started"
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        os.kill(run.pid, signal.SIGKILL)
+        run.wait()
+        deadline = time.monotonic() + 10
+        while live_processes_in_group(run.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert live_processes_in_group(run.pid) == []
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(run.pid, signal.SIGKILL)

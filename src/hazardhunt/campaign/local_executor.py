@@ -4,13 +4,11 @@ with the campaign process; a worker that dies takes only its own run with it."""
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import multiprocessing
 import multiprocessing.connection
 import os
 import shutil
 import signal
-import sys
 import time
 from collections import deque
 from collections.abc import Callable
@@ -23,6 +21,7 @@ from hazardhunt.campaign.ledger import RunOutcome, failed
 from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial_directory
 from hazardhunt.campaign.store import RunSummary
 from hazardhunt.errors import HazardhuntError
+from hazardhunt.processes import die_with_parent
 
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
@@ -30,8 +29,6 @@ PROGRESS_INTERVAL_S = 0.5
 WORKER_DEATH_RETRIES = 2
 """Times a run is started again, in a new worker process, after the process executing it died
 (killed by a signal, say the out-of-memory killer's SIGKILL) before it is recorded as failed."""
-
-_PR_SET_PDEATHSIG = 1
 
 
 class WorkerDied(HazardhuntError, RuntimeError):  # noqa: N818 - names an outcome, as summary.json reports it
@@ -214,13 +211,7 @@ def _serve(connection: Connection, campaign_pid: int, runs_directory: Path) -> N
 
 def _initialize_worker(campaign_pid: int) -> None:
     """Tie the worker's life to the campaign process, so that no orphan goes on writing."""
-    if sys.platform == "linux":
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL) != 0:
-            errno = ctypes.get_errno()
-            raise OSError(errno, f"prctl(PR_SET_PDEATHSIG): {os.strerror(errno)}")
-    if os.getppid() != campaign_pid:  # the campaign died before prctl took effect
-        os._exit(1)
+    die_with_parent(campaign_pid)
     # Ctrl-C is the campaign process's to handle: it kills the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 

@@ -9,6 +9,7 @@ depend on how many workers play them.
 from __future__ import annotations
 
 import multiprocessing
+import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from hazardhunt.processes import die_with_parent
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.spaces import DecisionSpace
@@ -80,7 +82,7 @@ class EpisodeEvaluator:
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context("spawn"),
                 initializer=_start_worker,
-                initargs=(source, self.recorder.keep_trajectory),
+                initargs=(os.getpid(), source, self.recorder.keep_trajectory),
             )
         return self._pool
 
@@ -106,8 +108,13 @@ class EpisodeEvaluator:
 _worker: tuple[Simulation, Callable[[EpisodeSummary], bool]] | None = None
 
 
-def _start_worker(source: SimulationSource, keep: Callable[[EpisodeSummary], bool]) -> None:
+def _start_worker(
+    parent_pid: int, source: SimulationSource, keep: Callable[[EpisodeSummary], bool]
+) -> None:
+    """Build the worker's simulation; the worker dies with the run's process (a run killed
+    with SIGKILL leaves no worker behind)."""
     global _worker
+    die_with_parent(parent_pid)
     _worker = (source if isinstance(source, Simulation) else source(), keep)
 
 
