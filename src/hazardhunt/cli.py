@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover
-    import tomli as tomllib
+    pass
 
 import numpy as np
 import typer
@@ -27,6 +27,7 @@ from rich.table import Table
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.testers.registry import TESTERS, is_import_path
+from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 if TYPE_CHECKING:
@@ -333,8 +334,10 @@ def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
         if not separator or not key.strip():
             raise ConfigError(f"{option}: {assignment!r} is not KEY=VALUE")
         try:
-            params[key.strip()] = tomllib.loads(f"value = {value}")["value"]
-        except tomllib.TOMLDecodeError:
+            params[key.strip()] = loads_toml(f"value = {value}")["value"]
+        except TomlTooDeepError as error:
+            raise ConfigError(f"{option}: {key.strip()}: {error}") from None
+        except TOMLDecodeError:
             params[key.strip()] = value
     return params
 

@@ -179,3 +179,28 @@ def test_a_killed_run_leaves_no_worker_process(tmp_path, tester):
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(run.pid, signal.SIGKILL)
+
+
+DEEP = "[" * 5_000 + "]" * 5_000
+
+
+def test_toml_nested_too_deeply_is_one_line_wherever_it_is_read(tmp_path):
+    case = tmp_path / "case.toml"
+    case.write_text(f"format = 1\nhuman = {DEEP}\n")
+    regressed = hazardhunt("regress", case)
+    assert regressed.returncode == 2
+    assert "not valid TOML: arrays or tables nested too deeply" in regressed.stderr
+    scenario = tmp_path / "deep.toml"
+    scenario.write_text(f"robot = {DEEP}\n")
+    ran = hazardhunt(
+        "run", "--scenario", scenario, "--field", "none", "--tester", "random",
+        "--episodes", 2, "--out", tmp_path / "run",
+    )  # fmt: skip
+    assert ran.returncode == 2
+    assert "nested too deeply" in ran.stderr
+    param = run(tmp_path, "--controller", PURSUIT, "--tester-param", f"batch_size={DEEP}")
+    assert param.returncode == 2
+    assert "--tester-param: batch_size: arrays or tables nested too deeply" in param.stderr
+    for done in (regressed, ran, param):
+        assert "Traceback" not in done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1

@@ -45,6 +45,7 @@ from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
+from hazardhunt.textfiles import loads_toml
 from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.scenario import (
     BUILTIN_SCENARIOS,
@@ -511,7 +512,7 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
         ConfigError: Naming the file, the field and what is wrong.
     """
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = loads_toml(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such campaign file") from None
     except IsADirectoryError:

@@ -42,6 +42,7 @@ from hazardhunt.campaign.run import build_simulation
 from hazardhunt.campaign.store import sut_error_of
 from hazardhunt.errors import InputError
 from hazardhunt.sut.plugins import PluginError
+from hazardhunt.textfiles import loads_toml
 from hazardhunt.world.scenario import (
     ScenarioError,
     format_validation_error,
@@ -392,7 +393,7 @@ def regress_case(
 
 def _read_case(path: Path) -> _Case:
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = loads_toml(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
         raise CaseError(f"{path}: not valid TOML: {error}") from None
     except OSError as error:

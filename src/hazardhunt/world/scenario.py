@@ -22,6 +22,7 @@ from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
 from hazardhunt.errors import InputError
+from hazardhunt.textfiles import loads_toml
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
 
@@ -217,7 +218,7 @@ def _build_scenario(spec: _ScenarioSpec, floor: FloorMap, path: Path) -> Scenari
 
 def _parse(path: Path, model: type[_Strict]) -> Any:
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = loads_toml(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
         raise ScenarioError(f"{path}: not valid TOML: {error}") from error
     except OSError as error:
@@ -287,7 +288,7 @@ def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
     """
     scenario = load_scenario(name_or_path)  # reports any problem with the files first
     path = Path(scenario.source)
-    data: dict[str, Any] = tomllib.loads(path.read_text(encoding="utf-8"))
+    data: dict[str, Any] = loads_toml(path.read_text(encoding="utf-8"))
     if isinstance(data.get("map"), str):
-        data["map"] = tomllib.loads((path.parent / data["map"]).read_text(encoding="utf-8"))
+        data["map"] = loads_toml((path.parent / data["map"]).read_text(encoding="utf-8"))
     return data
