@@ -204,3 +204,26 @@ def test_toml_nested_too_deeply_is_one_line_wherever_it_is_read(tmp_path):
     for done in (regressed, ran, param):
         assert "Traceback" not in done.stderr
         assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_names_that_look_like_mathtext_are_drawn_as_text(tmp_path):
+    out = tmp_path / "run"
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "$\\frac{$",
+        "--tester-param", "method=random", "--episodes", 6, "--out", out,
+        "--controller", PURSUIT, "--classifier", f"{HERE}:DollarClassifier", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = hazardhunt("report", out)
+    assert report.returncode == 0, report.stderr
+    assert "Traceback" not in report.stderr
+
+
+class DollarClassifier(NumberClassifier):
+    """Names every failure ``$\\frac{$``."""
+
+    def classes_for(self, field):
+        return ("$\\frac{$", "other")
+
+    def classify(self, trajectory, summary, field):
+        return "$\\frac{$"

@@ -28,6 +28,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import matplotlib
 import pandas as pd
 from markupsafe import Markup, escape
 
@@ -135,7 +136,9 @@ def write_report(
     try:
         report = _Report(scratch)
         report.directory.mkdir()
-        _write_sections(report, results, tell)
+        # Names from the results (testers, classes) are text, never matplotlib's mathtext.
+        with matplotlib.rc_context({"text.parse_math": False}):
+            _write_sections(report, results, tell)
         tell("writing index.html")
         write_json_atomic(report.directory / "summary.json", _summary(results, report))
         write_bytes_atomic(report.directory / "index.html", _page(results, report).encode())
