@@ -78,7 +78,7 @@ def scenarios(
     field: Annotated[
         str, typer.Option(help="Protective field: none, 1.25m, 2m or one the scenario defines.")
     ] = "1.25m",
-    seed: Annotated[int, typer.Option(help="Seed of the random human.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the random human.")] = 0,
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
 ) -> None:
     """Simulate one episode per scenario with a random human and draw each."""

@@ -5,6 +5,7 @@ traceback."""
 import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -227,3 +228,51 @@ class DollarClassifier(NumberClassifier):
 
     def classify(self, trajectory, summary, field):
         return "$\\frac{$"
+
+
+def test_a_negative_seed_for_scenarios_is_a_usage_error(tmp_path):
+    done = hazardhunt("scenarios", "--seed", "-1", "--out", tmp_path / "pictures")
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    assert "--seed" in done.stderr
+
+
+@pytest.fixture(scope="module")
+def pursuit_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pursuit") / "run"
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 6, "--out", out, "--controller", PURSUIT, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+@pytest.mark.parametrize(
+    ("config", "problem"),
+    [
+        ("[1, 2", "config.json: cannot be read as JSON: "),
+        ('{"run": {"scenario": 5}}', "config.json: not a run's configuration: run.scenario: "),
+        ("[]", "config.json: not a run's configuration (no run table)"),
+    ],
+)
+def test_an_invalid_config_json_is_one_line_for_replay_and_export(
+    pursuit_run, tmp_path, config, problem
+):
+    received = tmp_path / "received"
+    shutil.copytree(pursuit_run, received)
+    (received / "config.json").write_text(config)
+    summary = json.loads((received / "summary.json").read_text())
+    del summary["checksums"]  # as for a run recorded before checksums
+    (received / "summary.json").write_text(json.dumps(summary))
+    episode = int(pd.read_parquet(received / "failures.parquet")["episode"][0])
+    for command in (
+        ["replay", received, "--episode", episode],
+        ["export", received, "--out", tmp_path / "cases"],
+    ):
+        done = hazardhunt(*command)
+        assert done.returncode == 2, command
+        assert "Traceback" not in done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1
+    replayed = hazardhunt("replay", received, "--episode", episode)
+    assert problem in replayed.stderr

@@ -15,12 +15,14 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import ValidationError
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import simulation_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.world.scenario import format_validation_error
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""
@@ -52,12 +54,26 @@ class ReplayResult:
 
 
 def load_run_config(run_directory: Path) -> RunConfig:
-    """A run's configuration, from ``config.json``."""
+    """A run's configuration, from ``config.json``.
+
+    Raises:
+        ReplayError: It is missing, or does not read as a run's configuration (naming the file
+            and the first problem).
+    """
     config_path = run_directory / "config.json"
     if not config_path.is_file():
         raise ReplayError(f"{run_directory}: not a run directory (no config.json)")
-    stored = json.loads(config_path.read_text())
-    return RunConfig.model_validate(stored["run"])
+    try:
+        stored = json.loads(config_path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ReplayError(f"{config_path}: cannot be read as JSON: {error}") from None
+    if not isinstance(stored, dict) or not isinstance(stored.get("run"), dict):
+        raise ReplayError(f"{config_path}: not a run's configuration (no run table)")
+    try:
+        return RunConfig.model_validate(stored["run"])
+    except ValidationError as error:
+        problem = format_validation_error(error)
+        raise ReplayError(f"{config_path}: not a run's configuration: run.{problem}") from None
 
 
 def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str, Any]]:
