@@ -276,3 +276,35 @@ def test_an_invalid_config_json_is_one_line_for_replay_and_export(
         assert len(done.stderr.strip().splitlines()) == 1
     replayed = hazardhunt("replay", received, "--episode", episode)
     assert problem in replayed.stderr
+
+
+@pytest.mark.parametrize(
+    ("change", "problem"),
+    [
+        (
+            lambda failures: failures.assign(max_risk=float("nan")),
+            "failures.parquet: max_risk holds a value that is not a finite number",
+        ),
+        (
+            lambda failures: failures.drop(columns="contact_face"),
+            "failures.parquet lacks the column contact_face",
+        ),
+    ],
+)
+def test_a_received_table_without_its_numbers_or_columns_is_named_damaged(
+    pursuit_run, tmp_path, change, problem
+):
+    from hazardhunt.campaign.store import file_checksums
+
+    received = tmp_path / "received"
+    shutil.copytree(pursuit_run, received)
+    failures = pd.read_parquet(received / "failures.parquet")
+    change(failures).to_parquet(received / "failures.parquet", index=False)
+    summary = json.loads((received / "summary.json").read_text())
+    summary["checksums"] = file_checksums(received)  # made that way, checksums and all
+    (received / "summary.json").write_text(json.dumps(summary))
+    done = hazardhunt("report", received)
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: {received}: the run is damaged ({problem}); run it again"
+    )
