@@ -565,7 +565,7 @@ def copy(
     copied = copy_results(directory, out)
     for run_id, damage in copied.damaged.items():
         console.print(
-            f"[yellow]warning:[/yellow] {escape(run_id)} not copied: damaged ({escape(damage)})"
+            f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
     console.print(
         f"{len(copied.copied)} run(s) copied, {len(copied.already_there)} already there, "
@@ -583,7 +583,7 @@ def _warn_of_damaged_runs(directory: Path) -> None:
         return  # the command reports it
     for run_id, damage in damaged.items():
         err_console.print(
-            f"[yellow]warning:[/yellow] run {escape(run_id)} is damaged ({escape(damage)}) and "
+            f"[yellow]warning:[/yellow] run {shown(run_id)} is damaged ({shown(damage)}) and "
             "left out; running the campaign again redoes it"
         )
 
@@ -656,15 +656,15 @@ def _print_regress(results: list[RegressionResult], counts: dict[str, int]) -> N
         now = r.failure_class if r.failure_class is not None else r.outcome
         verdict = f"[{colours[r.verdict]}]{r.verdict}[/{colours[r.verdict]}]"
         table.add_row(
-            escape(r.case), escape(r.expected_class), escape(now), f"{r.sim_time:.2f}", verdict
+            shown(r.case), shown(r.expected_class), shown(now), f"{r.sim_time:.2f}", verdict
         )
     console.print(table)
     console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
     for r in results:
         if r.error is not None:
             err_console.print(
-                f"[red]error:[/red] {escape(r.case)}: the SUT erred and the case tested "
-                f"nothing: {escape(r.error)}"
+                f"[red]error:[/red] {shown(r.case)}: the SUT erred and the case tested "
+                f"nothing: {shown(r.error)}"
             )
 
 
@@ -769,8 +769,15 @@ INTERRUPTED = 130
 """The exit code of a command interrupted with Ctrl-C (128 + SIGINT), as shells use it."""
 
 
+def shown(text: str) -> str:
+    """Text read from a file someone else may have made, as the terminal shows it: its control
+    characters (escape sequences) written out as ``\\x1b`` and its rich markup escaped."""
+    printable = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return escape(printable)
+
+
 def _exit_with(message: str, code: int) -> NoReturn:
-    err_console.print(f"[red]error:[/red] {escape(message)}")
+    err_console.print(f"[red]error:[/red] {shown(message)}")
     raise SystemExit(code) from None
 
 

@@ -308,3 +308,94 @@ def test_a_received_table_without_its_numbers_or_columns_is_named_damaged(
     assert done.stderr.strip() == (
         f"error: {received}: the run is damaged ({problem}); run it again"
     )
+
+
+class Short:
+    """A tester that plays two episodes, whatever its budget."""
+
+    name = "short"
+
+    def __init__(self, seed):
+        self.seed = seed
+
+    def explore(self, env, episodes):
+        for _ in range(2):
+            env.reset(seed=self.seed)
+            done = False
+            while not done:
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                done = terminated or truncated
+
+    def save(self, directory):
+        directory.mkdir(parents=True, exist_ok=True)
+
+
+def test_a_tester_that_plays_less_than_its_budget_fails_its_run(tmp_path):
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", f"{HERE}:Short",
+        "--episodes", 5, "--out", tmp_path / "run", "--controller", PURSUIT, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 1
+    assert "its tester played 2 episodes of a budget of 5" in done.stderr
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "problem"),
+    [
+        ("--robot", "length=1e6", "length must be at most 10"),
+        ("--stall-duration", "1e-300", "stall_duration: Input should be greater than or equal"),
+        ("--field", "3m", "unknown field '3m': use one of none, 1.25m, 2m"),
+    ],
+)
+def test_values_no_robot_or_clock_can_hold_are_refused_in_one_line(
+    tmp_path, option, value, problem
+):
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 2, "--out", tmp_path / "run", option, value,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert done.stderr.strip() == f"error: {problem}" or (
+        problem in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    )
+    assert "2m, none" not in done.stderr  # the field settings are listed once
+
+
+def test_an_out_on_a_file_system_that_cannot_hold_it_is_bad_input(tmp_path):
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 2, "--out", "/proc/hazardhunt-run", "--controller", PURSUIT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert done.stderr.startswith("error: --out: cannot write in /proc")
+
+
+def test_a_run_whose_summary_was_deleted_is_run_again(pursuit_run, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(pursuit_run, out)
+    (out / "summary.json").unlink()
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 6, "--out", out, "--controller", PURSUIT, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "unfinished (no summary.json); running it again" in done.stderr
+    assert (out / "summary.json").is_file()
+
+
+def test_copy_on_a_full_disk_says_so_in_one_short_line(pursuit_run, tmp_path, monkeypatch):
+    import errno
+
+    from hazardhunt.campaign import store
+
+    def full(source, destination, **_):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), destination)
+
+    monkeypatch.setattr(shutil, "copyfile", full)  # a fault: the disk is full
+    with pytest.raises(OSError, match="files could not be copied") as raised:
+        store.copy_run(pursuit_run, tmp_path / "kept")
+    message = str(raised.value)
+    assert "files could not be copied; the first:" in message
+    assert len(message) < 400
+    assert not list(tmp_path.glob(".kept.partial"))

@@ -321,3 +321,15 @@ def test_a_received_run_id_never_takes_export_outside_its_folder(run, tmp_path, 
     assert written
     assert all(path.parent == out for path in written)
     assert not list(Path("/tmp").glob("ABSOLUTE*"))
+
+
+def test_text_from_a_case_file_reaches_the_terminal_as_text(cases, tmp_path):
+    import tomllib
+
+    source = next(cases.glob("*.toml"))
+    case = tomllib.loads(source.read_text())
+    case["expected"]["class"] = "side\x1b[2J[red]forged[/red]"
+    (tmp_path / "forged.toml").write_text(tomli_w.dumps(case))
+    done = hazardhunt("regress", tmp_path / "forged.toml", "--trust-plugins", cwd=EXAMPLE)
+    assert "\x1b" not in done.stdout + done.stderr
+    assert "side\\x1b[2J[red]forged[/red]" in done.stdout

@@ -47,7 +47,7 @@ from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, execute_loc
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.progress import ProgressDisplay, print_campaign_table
 from hazardhunt.campaign.ray_executor import execute_on_ray
-from hazardhunt.campaign.run import check_sut, is_complete
+from hazardhunt.campaign.run import check_sut, is_complete, make_directory
 from hazardhunt.campaign.store import CampaignSummary, write_json_atomic
 from hazardhunt.errors import HazardhuntError
 
@@ -112,7 +112,7 @@ def run_campaign(
     selected = selected_runs(runs, only)
     _check_suts(selected)
     _check_directory(config, out)
-    out.mkdir(parents=True, exist_ok=True)
+    make_directory(out, "--out")
     with exclusive_lock(out / ".lock", out, "campaign"):
         _check_directory(config, out)  # another campaign may have claimed it before our lock
         if not _holds_complete_runs(out):  # else it holds this campaign: checked above

@@ -12,6 +12,7 @@ import itertools
 import os
 import re
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -75,6 +76,8 @@ Seconds = Annotated[float, Strict(), Field(gt=0)]
 
 MAX_EPISODE_DURATION = 3600.0
 """The longest episode, in s of simulated time."""
+MIN_STALL_DURATION = 0.05
+"""The shortest stall limit, in s: one physics step."""
 MAX_CONTROLLER_TIMEOUT = 86_400.0
 """The longest time limit on one call of a plug-in, in s (a day): the timer cannot hold much
 more."""
@@ -95,7 +98,9 @@ class EnvOptions(_Strict):
     """The NMPC's solver."""
     episode_duration: Annotated[Seconds, Field(le=MAX_EPISODE_DURATION)] = 30.0
     """Simulated time after which an episode times out, in s."""
-    stall_duration: Seconds = 10.0
+    stall_duration: Annotated[
+        float, Strict(), Field(ge=MIN_STALL_DURATION, le=MAX_EPISODE_DURATION)
+    ] = 10.0
     """Continuous emergency-stop time after which an episode stalls, in s."""
     controller_timeout: float | None = Field(
         default=None, gt=0, le=MAX_CONTROLLER_TIMEOUT, allow_inf_nan=False
@@ -577,7 +582,7 @@ def _tester_plugins(
 def check_output_location(out: Path, option: str = "--out") -> None:
     """Raises ConfigError unless results can be written to ``out``: it is a directory or can be
     made one (its nearest existing ancestor is a directory) that this process may write.
-    Nothing is created.
+    Nothing is left behind (a probe file is created there and removed at once).
 
     Args:
         out: The run or campaign directory.
@@ -590,6 +595,11 @@ def check_output_location(out: Path, option: str = "--out") -> None:
         raise ConfigError(f"{option}: {existing} is a file, not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ConfigError(f"{option}: cannot write in {existing} (read-only, or no permission)")
+    try:  # what permissions do not tell: a read-only or virtual file system (/proc)
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as error:
+        raise ConfigError(f"{option}: cannot write in {existing}: {error.strerror}") from None
 
 
 def check_plugins(config: RunConfig | CampaignConfig) -> None:

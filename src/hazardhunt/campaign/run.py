@@ -217,6 +217,11 @@ def record_run(
         recorder.close()  # the worker processes of batches played on several cores
     if store.sut_error_count >= config.sut_error_limit * len(store.episodes):
         raise NothingTested(config, store)  # a tester that plays fewer episodes than its budget
+    if len(store.episodes) != config.episodes:
+        raise RunFailed(
+            f"run {config.run_id}: its tester played {len(store.episodes)} episodes of a budget "
+            f"of {config.episodes}; a run plays its budget, so nothing of it was kept"
+        )
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock
@@ -357,7 +362,7 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
             "run the campaign, or choose another --out"
         )
     check_sut(config)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_directory(out.parent, "--out")
     with exclusive_lock(out.parent / f".{out.name}.lock", out, "run"):
         if out.exists():
             summary = _finished_run(config, out, console)
@@ -377,6 +382,11 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
             run whose configuration cannot be read.
     """
     if not is_finished(out):
+        if _written_by(out, config):  # a run of this configuration whose summary.json is lost
+            if console is not None:
+                console.print(f"{out}: unfinished (no summary.json); running it again")
+            shutil.rmtree(out)
+            return None
         raise ConfigError(f"{out}: exists and is not a finished run; choose another --out")
     damage = find_damage(out)
     try:
@@ -397,6 +407,28 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
         console.print(f"{out}: already complete")
     summary: RunSummary = json.loads((out / "summary.json").read_text())
     return summary
+
+
+def _written_by(out: Path, config: RunConfig) -> bool:
+    """Whether ``out`` holds the files of a run of ``config`` (its ``config.json`` says so)."""
+    try:
+        stored = json.loads((out / "config.json").read_text())["run"]
+        return RunConfig.model_validate(stored) == config
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+def make_directory(path: Path, option: str) -> None:
+    """Create ``path`` and its parents if they are missing.
+
+    Raises:
+        ConfigError: It cannot be created (naming ``option``): a read-only or virtual file
+            system such as /proc, no permission.
+    """
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ConfigError(f"{option}: cannot create {path}: {error.strerror or error}") from None
 
 
 def _with_progress(config: RunConfig, out: Path, console: Console) -> RunSummary:

@@ -475,12 +475,20 @@ def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -
     partial = destination.with_name(f".{destination.name}.partial")
     shutil.rmtree(partial, ignore_errors=True)
     try:
-        shutil.copytree(
-            source,
-            partial,
-            ignore=shutil.ignore_patterns(*leave_out, "summary.json"),
-            symlinks=True,  # never followed (there are none: checked above)
-        )
+        try:
+            shutil.copytree(
+                source,
+                partial,
+                ignore=shutil.ignore_patterns(*leave_out, "summary.json"),
+                symlinks=True,  # never followed (there are none: checked above)
+            )
+        except shutil.Error as error:  # one entry per file: a full disk lists them all
+            failed = error.args[0] if error.args and isinstance(error.args[0], list) else []
+            first = failed[0][2] if failed else str(error)
+            raise OSError(
+                f"{destination}: {len(failed) or 'some'} files could not be copied; the first: "
+                f"{first}"
+            ) from None
         summary = json.loads((source / "summary.json").read_bytes())
         already = [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
         summary[LEFT_OUT_KEY] = sorted(set(already) | set(leave_out))

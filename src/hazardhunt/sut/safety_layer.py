@@ -84,8 +84,7 @@ def field_shape(scenario: Scenario, setting: str) -> FieldShape:
     shapes = scenario_field_shapes(scenario)
     if setting in shapes:
         return shapes[setting]
-    known = [*FIELD_SETTINGS, *shapes]
-    raise ValueError(f"unknown field {setting!r}: use one of {', '.join(known)}")
+    raise ValueError(f"unknown field {setting!r}: use one of {', '.join(shapes)}")
 
 
 def scenario_field_shapes(scenario: Scenario) -> dict[str, FieldShape]:

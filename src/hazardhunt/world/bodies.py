@@ -34,11 +34,28 @@ class RobotParams:
         for name, value in vars(self).items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, not {value!r}")
+            limit = ROBOT_LIMITS[name]
+            if value > limit:
+                raise ValueError(f"{name} must be at most {limit:g}, not {value!r}")
 
     @property
     def half_diagonal(self) -> float:
         """Radius of the smallest disc around the rectangle, in m."""
         return math.hypot(self.length / 2, self.width / 2)
+
+
+ROBOT_LIMITS = {
+    "length": 10.0,
+    "width": 10.0,
+    "max_speed": 10.0,
+    "max_yaw_rate": 10.0,
+    "max_acceleration": 50.0,
+    "max_yaw_acceleration": 100.0,
+    "emergency_deceleration": 100.0,
+    "goal_tolerance": 10.0,
+}
+"""The largest value of each robot parameter (m, m/s, rad/s, m/s², rad/s²): far beyond any
+mobile robot on a shop floor, so that a typo (a length of 1e6 m) is refused when read."""
 
 
 @dataclass(frozen=True)
