@@ -33,7 +33,7 @@ from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
-    from hazardhunt.campaign.store import RunSummary
+    from hazardhunt.campaign.records import RunSummary
     from hazardhunt.cases import RegressionResult
 
 app = typer.Typer(

@@ -47,8 +47,9 @@ from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, execute_loc
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.progress import ProgressDisplay, print_campaign_table
 from hazardhunt.campaign.ray_executor import execute_on_ray
+from hazardhunt.campaign.records import CampaignSummary
 from hazardhunt.campaign.run import check_sut, is_complete, make_directory
-from hazardhunt.campaign.store import CampaignSummary, write_json_atomic
+from hazardhunt.campaign.store import write_json_atomic
 from hazardhunt.errors import HazardhuntError
 
 EXECUTORS = ("local", "ray")

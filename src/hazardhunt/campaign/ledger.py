@@ -12,15 +12,9 @@ from pathlib import Path
 from typing import cast
 
 from hazardhunt.campaign.config import CampaignConfig, RunConfig
+from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.store import (
-    CampaignSummary,
-    LedgerEntry,
-    RunSummary,
-    campaign_totals,
-    find_damage,
-    write_json_atomic,
-)
+from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import RunOutcome, failed
+from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial_directory
-from hazardhunt.campaign.store import RunSummary
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.processes import die_with_parent
 

@@ -17,7 +17,7 @@ from rich.table import Table
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
-from hazardhunt.campaign.store import CampaignSummary, LedgerEntry
+from hazardhunt.campaign.records import CampaignSummary, LedgerEntry
 
 LOG_INTERVAL_S = 600.0
 """Time between two progress lines when the campaign's output is not a terminal (a log file,

@@ -15,8 +15,9 @@ from typing import Any
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import RunOutcome, failed
 from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, OnOutcome
+from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import is_finished, partial_directory, record_run
-from hazardhunt.campaign.store import RunSummary, find_damage
+from hazardhunt.campaign.store import find_damage
 
 
 def execute_on_ray(

@@ -45,13 +45,8 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
-from hazardhunt.campaign.store import (
-    RunStore,
-    RunSummary,
-    file_checksums,
-    find_damage,
-    write_json_atomic,
-)
+from hazardhunt.campaign.records import RunSummary
+from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError, PluginError
 from hazardhunt.sim.simulation import PeriodError, Simulation
@@ -215,13 +210,7 @@ def record_run(
         tester.explore(recorder, config.episodes)
     finally:
         recorder.close()  # the worker processes of batches played on several cores
-    if store.sut_error_count >= config.sut_error_limit * len(store.episodes):
-        raise NothingTested(config, store)  # a tester that plays fewer episodes than its budget
-    if len(store.episodes) != config.episodes:
-        raise RunFailed(
-            f"run {config.run_id}: its tester played {len(store.episodes)} episodes of a budget "
-            f"of {config.episodes}; a run plays its budget, so nothing of it was kept"
-        )
+    _check_played(config, store)
     tester.save(directory / "tester")
     store.close()
     wall_time = time.perf_counter() - clock
@@ -229,6 +218,18 @@ def record_run(
     summary["checksums"] = file_checksums(directory)
     write_json_atomic(directory / "summary.json", summary)
     return summary
+
+
+def _check_played(config: RunConfig, store: RunStore) -> None:
+    """Raises RunFailed unless the run tested its SUT (``NothingTested``) with every episode of
+    its budget, no more and no fewer."""
+    if store.sut_error_count >= config.sut_error_limit * len(store.episodes):
+        raise NothingTested(config, store)  # a tester that played no episode, too
+    if len(store.episodes) != config.episodes:
+        raise RunFailed(
+            f"run {config.run_id}: its tester played {len(store.episodes)} episodes of a budget "
+            f"of {config.episodes}; a run plays its budget, so nothing of it was kept"
+        )
 
 
 def _run_summary(

@@ -1,0 +1,84 @@
+"""The records a run and a campaign write about themselves (``summary.json``), typed: what
+moves between a run, the executors, the ledger and the commands."""
+
+from __future__ import annotations
+
+from typing import Any, TypedDict
+
+
+class FirstSutError(TypedDict):
+    """The first episode of a run that ended in ``sut_error``, and what the SUT did."""
+
+    episode: int
+    error: str
+
+
+class RunSummary(TypedDict, total=False):
+    """A run's ``summary.json`` (:func:`hazardhunt.campaign.run.record_run` writes every key;
+    runs recorded by earlier versions may lack the later ones)."""
+
+    run_id: str
+    scenario: str
+    field: str
+    tester: str
+    seed: int
+    source_digest: str
+    episodes: int
+    failures: int
+    safe_contacts: int
+    stalls: int
+    timeouts: int
+    goals: int
+    sut_errors: int
+    classifier_errors: int
+    """Failures the classifier raised on or named no class for (recorded as ``other``)."""
+    first_classifier_error: FirstSutError | None
+    first_failure_episode: int | None
+    first_sut_error: FirstSutError | None
+    field_shape: dict[str, Any]
+    classifier: str
+    classes: list[str]
+    classes_found: int
+    classes_total: int
+    wall_time_s: float
+    episodes_per_s: float
+    started_at: str
+    finished_at: str
+    checksums: dict[str, str]
+    """The SHA-256 of every other file of the run."""
+    left_out: list[str]
+    """Folders a copy left out (``trajectories``)."""
+
+
+class LedgerEntry(RunSummary, total=False):
+    """A run as a campaign's ``summary.json`` lists it: its summary (without checksums) once
+    complete, else its keys; and how it stands."""
+
+    status: str
+    """``complete``, ``failed`` or ``pending``."""
+    error: str | None
+    """``Type: message`` of what a failed run raised."""
+    traceback: str | None
+    ray_node: str
+    """The Ray node that executed the run (the ``ray`` executor only)."""
+
+
+class CampaignTotals(TypedDict):
+    """A campaign's counts over its runs."""
+
+    runs_total: int
+    runs_complete: int
+    runs_failed: int
+    runs_pending: int
+    episodes: int
+    failures: int
+    sut_errors: int
+
+
+class CampaignSummary(CampaignTotals):
+    """A campaign's ``summary.json``."""
+
+    campaign: dict[str, Any]
+    """The campaign's configuration."""
+    updated_at: str
+    runs: list[LedgerEntry]
