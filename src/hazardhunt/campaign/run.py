@@ -185,8 +185,12 @@ def record_run(
             "started_at": started_at,
         },
     )
-    replay_keys = {"scenario": config.scenario, "field": config.field, "seed": config.seed}
-    replay_keys["decision_period"] = config.env.decision_period
+    replay_keys = {
+        "scenario": config.scenario,
+        "field": config.field,
+        "seed": config.seed,
+        "decision_period": config.env.decision_period,
+    }
     store = RunStore(directory, replay_keys, classifier, simulation.field)
     clock = time.perf_counter()
 
