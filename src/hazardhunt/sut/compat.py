@@ -43,7 +43,8 @@ CURRENT_VERSION = "0.2.0"
 
 
 class ProtocolWarning(FutureWarning):
-    """A plug-in implements an earlier version of its protocol; it works, and will not forever."""
+    """A plug-in implements an earlier version of its protocol: it works; the warning says what
+    to add to silence it."""
 
 
 def takes(method: Callable[..., Any], count: int) -> bool:
