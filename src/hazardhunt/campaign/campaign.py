@@ -41,7 +41,7 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig
+from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig, first_difference
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
 from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, execute_locally
 from hazardhunt.campaign.lock import exclusive_lock
@@ -217,7 +217,7 @@ def _check_directory(config: CampaignConfig, out: Path) -> None:
             ) from None
         if stored != config:
             raise ConfigError(
-                f"{out}: holds a different campaign ({_first_difference(stored, config)}); "
+                f"{out}: holds a different campaign ({first_difference(stored, config)}); "
                 "use another --out or delete it"
             )
     elif out.exists() and (
@@ -231,12 +231,6 @@ def _holds_complete_runs(out: Path) -> bool:
     result, and may be taken over by another campaign)."""
     runs = out / "runs"
     return runs.is_dir() and any(is_complete(directory) for directory in runs.iterdir())
-
-
-def _first_difference(stored: CampaignConfig, given: CampaignConfig) -> str:
-    stored_values, given_values = stored.model_dump(mode="json"), given.model_dump(mode="json")
-    key = next(k for k in stored_values if stored_values[k] != given_values[k])
-    return f"{key}: there {stored_values[key]!r}, here {given_values[key]!r}"
 
 
 def _execute(

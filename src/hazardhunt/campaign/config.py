@@ -579,6 +579,14 @@ def _tester_plugins(
     return plugins
 
 
+def first_difference(stored: BaseModel, given: BaseModel) -> str:
+    """The first setting in which two configurations of one kind differ, as ``key: there X,
+    here Y`` (``stored`` is there, ``given`` here)."""
+    stored_values, given_values = stored.model_dump(mode="json"), given.model_dump(mode="json")
+    key = next(k for k in stored_values if stored_values[k] != given_values.get(k))
+    return f"{key}: there {stored_values[key]!r}, here {given_values.get(key)!r}"
+
+
 def check_output_location(out: Path, option: str = "--out") -> None:
     """Raises ConfigError unless results can be written to ``out``: it is a directory or can be
     made one (its nearest existing ancestor is a directory) that this process may write.

@@ -11,8 +11,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import cast
 
-from hazardhunt.campaign.config import CampaignConfig, RunConfig
+from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_difference
 from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary
+from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
 
@@ -119,18 +120,12 @@ def _not_this_run(directory: Path, run: RunConfig) -> str | None:
     """Why the finished run in ``directory`` is not ``run`` (another configuration), if it is
     not."""
     try:
-        stored = RunConfig.model_validate(
-            json.loads((directory / "config.json").read_text())["run"]
-        )
-    except (OSError, ValueError, KeyError, TypeError):
+        stored = load_run_config(directory)
+    except ReplayError:
         return "its config.json does not read as a run's configuration"
     if stored == run:
         return None
-    mine, theirs = run.model_dump(mode="json"), stored.model_dump(mode="json")
-    key = next(k for k in mine if mine[k] != theirs.get(k))
-    return (
-        f"it holds a run of another configuration ({key}: {theirs.get(key)!r}, not {mine[key]!r})"
-    )
+    return f"it holds a run of another configuration ({first_difference(stored, run)})"
 
 
 def _ledger_entry(summary: RunSummary, status: str) -> LedgerEntry:

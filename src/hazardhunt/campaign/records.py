@@ -6,8 +6,9 @@ from __future__ import annotations
 from typing import Any, TypedDict
 
 
-class FirstSutError(TypedDict):
-    """The first episode of a run that ended in ``sut_error``, and what the SUT did."""
+class FirstError(TypedDict):
+    """The first episode of a run in which a plug-in failed (the SUT, the classifier), and
+    what it did."""
 
     episode: int
     error: str
@@ -32,9 +33,9 @@ class RunSummary(TypedDict, total=False):
     sut_errors: int
     classifier_errors: int
     """Failures the classifier raised on or named no class for (recorded as ``other``)."""
-    first_classifier_error: FirstSutError | None
+    first_classifier_error: FirstError | None
     first_failure_episode: int | None
-    first_sut_error: FirstSutError | None
+    first_sut_error: FirstError | None
     field_shape: dict[str, Any]
     classifier: str
     classes: list[str]

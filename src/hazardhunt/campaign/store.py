@@ -33,7 +33,7 @@ from typing import Any
 import pandas as pd
 import pyarrow.parquet as pq
 
-from hazardhunt.campaign.records import CampaignTotals, FirstSutError, LedgerEntry
+from hazardhunt.campaign.records import CampaignTotals, FirstError, LedgerEntry
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -238,10 +238,10 @@ class RunStore:
         self.failures: list[dict[str, Any]] = []
         self.sut_error_count = 0
         """Episodes stored so far that ended in ``sut_error``."""
-        self.first_sut_error: FirstSutError | None = None
+        self.first_sut_error: FirstError | None = None
         self.classifier_errors = 0
         """Failures the classifier raised on or gave no class name for (recorded as ``other``)."""
-        self.first_classifier_error: FirstSutError | None = None
+        self.first_classifier_error: FirstError | None = None
         """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
