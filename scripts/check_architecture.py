@@ -25,6 +25,7 @@ LAYERS = (
     "cli",
     "cases",
     "analysis",
+    "likelihood",
     "campaign",
     "testers",
     "env",

@@ -695,6 +695,108 @@ def new_sut(
     )
 
 
+@app.command(
+    "estimate",
+    help="Estimate the probability of a failure per encounter when people behave as a model of "
+    "them says and the SUT's sensors and brake vary as a model of its uncertainties says "
+    "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate. Exits "
+    "with code 1 when every episode ended in a SUT error (nothing was tested); 2 for bad input, "
+    "before anything runs.",
+)
+def estimate_command(
+    out: Annotated[Path, typer.Option(help="Directory for the estimate's episodes and result.")],
+    scenario: Annotated[
+        str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")
+    ] = "crossing",
+    field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")] = "1.25m",
+    method: Annotated[
+        str, typer.Option(help="ce (cross-entropy importance sampling) or mc (plain Monte Carlo).")
+    ] = "ce",
+    episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 2000,
+    batch_size: Annotated[int, typer.Option(help="Episodes per batch.")] = 200,
+    seed: Annotated[int, typer.Option(help="Seed of the estimate.")] = 0,
+    people: Annotated[
+        str | None,
+        typer.Option(
+            help="Model of people: a model file (.toml) or package.module:Class [default: the "
+            "built-in shop-floor walkers]."
+        ),
+    ] = None,
+    uncertainties: Annotated[
+        str | None,
+        typer.Option(
+            help="The SUT's uncertainties: a file (.toml), or none [default: the built-in ones]."
+        ),
+    ] = None,
+    controller: ControllerOption = None,
+    controller_param: ControllerParamOption = None,
+    safety_layer: SafetyLayerOption = None,
+    safety_layer_param: SafetyLayerParamOption = None,
+    workers: Annotated[int, typer.Option(min=1, max=64, help="Processes that play episodes.")] = 1,
+) -> None:
+    """The command; long because its signature is the command's options."""
+    from hazardhunt.campaign.config import EnvOptions
+    from hazardhunt.likelihood.estimators import EstimatorParams
+    from hazardhunt.likelihood.results import summarise, write_summary
+    from hazardhunt.likelihood.run import WALKING_PERIOD, EstimateConfig, EstimateRun
+
+    config = _validated(
+        lambda: EstimateConfig(
+            scenario=scenario,
+            field=field,
+            people=people,
+            uncertainties=uncertainties,
+            controller=_plugin("--controller", controller, controller_param),
+            safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
+            env=EnvOptions(decision_period=WALKING_PERIOD),
+            estimator=EstimatorParams(method=method, batch_size=batch_size),  # type: ignore[arg-type]
+            episodes=episodes,
+            seed=seed,
+        )
+    )
+    estimate_run = EstimateRun(config, out, workers=workers)
+    with Progress(console=err_console, transient=True) as bar:
+        task = bar.add_task(f"estimate ({method})", total=config.episodes)
+        table = estimate_run.run(lambda done, total: bar.update(task, completed=done))
+    summary = summarise(config, table)
+    path = write_summary(out, summary)
+    _print_estimate(summary, path)
+
+
+def _print_estimate(summary: dict[str, Any], path: Path) -> None:
+    result = summary["probability"]
+    table = Table("failures per encounter", "95 % interval", "episodes", "failures", "method")
+    table.add_row(
+        f"{result['probability']:.3g}",
+        f"[{result['low']:.3g}, {result['high']:.3g}] ({result['interval']})",
+        f"{summary['episodes']:,}",
+        f"{result['failures']:,}",
+        summary["method"],
+    )
+    for name, part in summary["classes"].items():
+        table.add_row(
+            f"  {shown(name)}: {part['probability']:.3g}",
+            f"[{part['low']:.3g}, {part['high']:.3g}]",
+            "",
+            f"{part['failures']:,}",
+            "",
+        )
+    console.print(table)
+    equivalent = summary["monte_carlo_equivalent"]
+    if equivalent is not None:
+        console.print(
+            f"relative error {equivalent['relative_error']:.0%}: plain Monte Carlo would need "
+            f"about {equivalent['episodes_for_same_error']:,.0f} episodes for it "
+            f"({equivalent['ratio']:.1f} times these)",
+            highlight=False,
+        )
+    if summary["sut_errors"]:
+        err_console.print(
+            f"[yellow]warning:[/yellow] {summary['sut_errors']:,} episodes ended in a SUT error"
+        )
+    console.print(f"estimate: {escape(str(path))}", highlight=False)
+
+
 def _validated(build: Callable[[], T]) -> T:
     from pydantic import ValidationError
 

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.errors import InputError
+from hazardhunt.sim.effects import EffectsState, SutEffects
 from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySample
 from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
 from hazardhunt.spec.risk import RiskParams, risk
@@ -206,6 +207,11 @@ class Simulation:
         self._goal: tuple[float, float] = (goal_x, goal_y)
         self._max_steps = round(termination.episode_duration / physics_step)
         self._started = False
+        self.effects: SutEffects | None = None
+        """The SUT's uncertainties in the episodes that start from now on; None: nominal."""
+        self._effects: EffectsState | None = None
+        self._braking = self.robot_params
+        """The robot's parameters the physics brakes with (the effects may change them)."""
 
     @classmethod
     def build(
@@ -291,6 +297,13 @@ class Simulation:
         self._risks: list[float] = []
         self._samples: list[tuple[Any, ...]] = []
         self._started_at = time.perf_counter()
+        self._effects = (
+            None if self.effects is None else EffectsState(self.effects, self.physics_step)
+        )
+        brake = None if self.effects is None else self.effects.brake_deceleration
+        self._braking = self.robot_params
+        if brake is not None:
+            self._braking = dataclasses.replace(self.robot_params, emergency_deceleration=brake)
         self.tracker.reset()
         self._reset_sut()
         self._started = True
@@ -416,6 +429,8 @@ class Simulation:
         """One physics step; the outcome if it ends the episode."""
         dt = self.physics_step
         now = self._steps * dt
+        if self._effects is not None:
+            self._effects.note_pose(self.human_pose)
         if not self._sut_error:  # else a reset failed: the SUT is not called again
             if self._steps % self._control_every == 0:
                 self._control(now)
@@ -425,7 +440,7 @@ class Simulation:
             self._command.speed,
             self._command.yaw_rate,
             dt,
-            self.robot_params,
+            self._braking,
             emergency_stop=self.emergency_stop,
         )
         human = move_human(
@@ -456,12 +471,15 @@ class Simulation:
             self._counts.safety_layer_errors.append(_named(error))
             self._sut_error = True
             status = SafetyStatus(self.emergency_stop, self.human_in_field)
-        if status.emergency_stop and not self.emergency_stop:
+        stop = status.emergency_stop
+        if self._effects is not None:
+            stop = self._effects.brake_engaged(stop)
+        if stop and not self.emergency_stop:
             self._counts.emergency_stops += 1
-        if self.emergency_stop and not status.emergency_stop:
+        if self.emergency_stop and not stop:
             # The controller resumes from standstill at its next period.
             self._command = ControlCommand(speed=0.0, yaw_rate=0.0, status=self._command.status)
-        self.emergency_stop = status.emergency_stop
+        self.emergency_stop = stop
         self.human_in_field = status.human_in_field
         self._counts.field_steps += int(status.human_in_field)
 
@@ -522,7 +540,11 @@ class Simulation:
 
     def _control(self, now: float) -> None:
         """One tracking and control instant."""
-        tracked = self.tracker.observe(now, self.human_position, self.human_heading)
+        if self._effects is None:
+            tracked = self.tracker.observe(now, self.human_position, self.human_heading)
+        else:
+            sighting = self._effects.sighting()
+            tracked = None if sighting is None else self.tracker.observe(now, *sighting)
         self.human_visible = tracked is not None
         if not self.emergency_stop:
             self._command = self._checked_command(now, tracked)

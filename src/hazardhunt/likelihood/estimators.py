@@ -1,0 +1,213 @@
+"""Failure probabilities from weighted episodes, and the proposal each estimator plays next.
+
+Every estimator here plays batches of episodes drawn from a proposal and records each episode's
+exact log likelihood ratio ``log p(x) - log q(x)`` against the model; the probability of a
+failure per encounter is then the mean of ``w * 1[failure]`` over all episodes, unbiased whatever
+the proposals were (each batch's proposal depends only on the batches before it):
+
+- ``mc``, plain Monte Carlo: the proposal is the model, every weight 1; the interval is
+  Clopper-Pearson's (exact);
+- ``ce``, cross-entropy importance sampling: the proposal moves, batch by batch, towards the
+  episodes whose score (the episode's largest risk) reached a level that rises to a failure
+  (:mod:`hazardhunt.likelihood.proposal`), then stays; the interval is the normal one on the
+  weighted mean (with no failure seen: the bound of :func:`zero_failure_bound`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+from scipy import stats
+
+from hazardhunt.likelihood.distributions import Dimension
+from hazardhunt.likelihood.proposal import Proposal
+
+Method = Literal["mc", "ce"]
+METHODS: tuple[Method, ...] = ("mc", "ce")
+CONFIDENCE = 0.95
+"""Coverage of every interval."""
+MIN_EPISODES = 100
+"""The smallest budget an estimate takes: fewer give no useful interval."""
+
+
+class EstimatorParams(BaseModel):
+    """How an estimator spends its episodes."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+    method: Method = "ce"
+    """``mc`` (plain Monte Carlo) or ``ce`` (cross-entropy importance sampling)."""
+    batch_size: int = Field(default=200, ge=10, le=100_000)
+    """Episodes per batch; the proposal may change between batches."""
+    elite_share: float = Field(default=0.1, gt=0.0, lt=1.0)
+    """``ce``: the share of a batch, highest scores first, the next proposal is fitted to."""
+    smoothing: float = Field(default=0.7, gt=0.0, le=1.0)
+    """``ce``: weight of a new fit against the proposal before it."""
+    defensive: float = Field(default=0.1, gt=0.0, le=1.0)
+    """``ce``: the model's share in every proposal (bounds each weight by 1 / defensive)."""
+    adapt_share: float = Field(default=0.5, gt=0.0, lt=1.0)
+    """``ce``: the largest share of the budget spent moving the proposal."""
+
+
+@dataclass(frozen=True)
+class Batch:
+    """A played batch: what an estimator reads to choose the next proposal."""
+
+    values: Sequence[Mapping[str, float]]
+    log_weights: NDArray[np.float64]
+    scores: NDArray[np.float64]
+    """Each episode's score: its largest risk (a failure scores the failure threshold or more)."""
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The proposal of the next batch, and why."""
+
+    proposal: Proposal
+    level: float | None
+    """The score level the proposal was fitted to (``ce``), None for the model."""
+    adapting: bool
+    """Whether the proposal may still move."""
+
+
+def next_proposal(
+    params: EstimatorParams,
+    dims: Sequence[Dimension],
+    played: Sequence[Batch],
+    threshold: float,
+    budget: int,
+) -> Schedule:
+    """The proposal of the batch after ``played`` (deterministic: a resumed estimate plays
+    the same proposals).
+
+    Args:
+        params: The estimator.
+        dims: The model's dimensions.
+        played: The batches so far, in order.
+        threshold: The score at and above which an episode is a failure.
+        budget: The estimate's episodes.
+    """
+    schedule = Schedule(Proposal.model(dims), None, params.method == "ce")
+    episodes = 0
+    values: list[Mapping[str, float]] = []
+    log_weights: list[NDArray[np.float64]] = []
+    scores: list[NDArray[np.float64]] = []
+    for batch in played:
+        episodes += len(batch.scores)
+        values += batch.values
+        log_weights.append(batch.log_weights)
+        scores.append(batch.scores)
+        if not schedule.adapting:
+            continue
+        still = episodes < params.adapt_share * budget
+        level = min(threshold, float(np.quantile(batch.scores, 1.0 - params.elite_share)))
+        if level <= 0.0:  # nothing scored: the next batch looks again
+            schedule = Schedule(schedule.proposal, schedule.level, still)
+            continue
+        # Every episode so far that reached the level, weighted by its likelihood ratio.
+        elite = np.flatnonzero(np.concatenate(scores) >= level)
+        weights = np.exp(np.concatenate(log_weights)[elite])
+        fitted = schedule.proposal.fitted(
+            [values[i] for i in elite], weights, params.smoothing, params.defensive
+        )
+        schedule = Schedule(fitted, level, still)
+    return schedule
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A probability per encounter with its interval."""
+
+    probability: float
+    low: float
+    high: float
+    episodes: int
+    failures: int
+    """Failures among the episodes (unweighted)."""
+    standard_error: float
+    relative_error: float | None
+    """Standard error over the estimate; None when it is 0."""
+    effective_sample_size: float
+    """``(sum w)^2 / sum w^2`` over all episodes (the episodes count for so many of the model's)."""
+    self_normalised: float
+    """``sum w 1[failure] / sum w``: the estimate that needs only weights up to a constant."""
+    interval: str
+    """How the interval was computed."""
+
+    def record(self) -> dict[str, Any]:
+        """As JSON data."""
+        return asdict(self)
+
+
+def clopper_pearson(failures: int, episodes: int) -> tuple[float, float]:
+    """The exact binomial interval of coverage :data:`CONFIDENCE`."""
+    tail = (1.0 - CONFIDENCE) / 2.0
+    low = 0.0 if failures == 0 else float(stats.beta.ppf(tail, failures, episodes - failures + 1))
+    high = (
+        1.0
+        if failures == episodes
+        else float(stats.beta.ppf(1 - tail, failures + 1, episodes - failures))
+    )
+    return low, high
+
+
+def zero_failure_bound(defensive: NDArray[np.float64]) -> float:
+    """An upper bound on the probability when no episode failed: each episode's proposal gives
+    a failure at least ``defensive`` times its model probability ``p``, so seeing none has
+    probability at most ``exp(-p * sum(defensive))``; the bound is the ``p`` at which that is
+    the interval's tail."""
+    tail = (1.0 - CONFIDENCE) / 2.0
+    return min(1.0, math.log(1.0 / tail) / float(np.sum(defensive)))
+
+
+def estimate(
+    failed: NDArray[np.bool_],
+    log_weights: NDArray[np.float64],
+    defensive: NDArray[np.float64],
+) -> Estimate:
+    """The probability of the event ``failed`` marks, from episodes with these log likelihood
+    ratios, drawn from proposals with these defensive shares.
+
+    Raises:
+        OverflowError: A weight overflows a float (the proposal is too far from the model).
+    """
+    failed = np.asarray(failed, dtype=bool)
+    n, k = len(failed), int(failed.sum())
+    with np.errstate(over="raise"):
+        try:
+            weights = np.exp(np.asarray(log_weights, dtype=np.float64))
+        except FloatingPointError:
+            worst = float(np.max(log_weights))
+            raise OverflowError(f"a likelihood ratio overflows: log weight {worst:.1f}") from None
+    ess = float(weights.sum() ** 2 / np.sum(weights**2)) if n else 0.0
+    normalised = float(weights[failed].sum() / weights.sum()) if n else 0.0
+    if np.all(log_weights == 0.0):  # plain Monte Carlo
+        low, high = clopper_pearson(k, n)
+        p = k / n
+        se = math.sqrt(p * (1 - p) / n)
+        return Estimate(
+            p, low, high, n, k, se, se / p if p else None, ess, normalised, "clopper-pearson"
+        )
+    terms = np.where(failed, weights, 0.0)
+    p = float(terms.mean())
+    if k == 0:
+        return Estimate(
+            0.0, 0.0, zero_failure_bound(defensive), n, 0, 0.0, None, ess, 0.0, "no failure: bound"
+        )
+    se = float(terms.std(ddof=1) / math.sqrt(n)) if n > 1 else math.inf
+    z = float(stats.norm.ppf(0.5 + CONFIDENCE / 2.0))
+    return Estimate(
+        p, max(p - z * se, 0.0), min(p + z * se, 1.0), n, k, se, se / p, ess, normalised, "normal"
+    )
+
+
+def episodes_for(probability: float, relative_error: float) -> float:
+    """Plain Monte Carlo's episodes for ``relative_error`` at ``probability``:
+    ``(1 - p) / (p * relative_error^2)``."""
+    return (1.0 - probability) / (probability * relative_error**2)

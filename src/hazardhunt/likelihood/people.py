@@ -1,0 +1,294 @@
+"""Models of the people on the floor: distributions over human behaviours with exact likelihoods.
+
+A :class:`HumanModel` is a product of independent random variables (its ``dimensions``, each a
+:class:`~hazardhunt.likelihood.distributions.Dimension`) and a rule that turns one draw of them
+into the human's behaviour in an episode (``policy``). What hazardhunt estimates is the
+probability of a failure per encounter when people behave as the model says: the adversarial
+testers stay as they are, the model is what "how likely" is measured against.
+
+The default, :class:`WalkerModel`, reads ``people.toml`` (shipped with hazardhunt; a file of the
+same form replaces it): a person sets off after a delay, walks to one of the floor's places along
+the aisles at a walking speed of their own, may pause once, and either looks out for the robot
+or crosses without looking.
+
+A model of one's own is a class named by import path (``package.module:Class``), called with
+the scenario (``Class(scenario=...)``), with the members of :class:`HumanModel`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from hazardhunt.errors import InputError
+from hazardhunt.likelihood.distributions import (
+    Dimension,
+    DistributionError,
+    dimension,
+    dimensions,
+    log_prob,
+    sample,
+)
+from hazardhunt.sim.simulation import Action, Policy, Simulation
+from hazardhunt.sut.plugins import build
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.world.geometry import point_rectangle_clearance
+from hazardhunt.world.scenario import Scenario
+
+DEFAULT_MODEL = "shopfloor"
+"""The name of the built-in model of people (``people.toml``)."""
+
+CHECK_SAMPLES = 64
+"""Draws on which a model's ``log_prob`` must be finite before anything runs."""
+
+STAND = np.array([-1.0, 0.0], dtype=np.float32)
+"""The normalised action of a human who stands still."""
+
+
+class ModelError(InputError):
+    """A model of people that cannot be used; the message names the file or plug-in."""
+
+
+@runtime_checkable
+class HumanModel(Protocol):
+    """A distribution over the human's behaviour in an encounter."""
+
+    @property
+    def dimensions(self) -> Sequence[Dimension]:
+        """The independent random variables of a behaviour, in order."""
+        ...
+
+    def policy(self, values: Mapping[str, float], simulation: Simulation) -> Policy:
+        """The human's behaviour for one draw of the dimensions: the next normalised action
+        from the simulation's state (deterministic: the same values play the same episode)."""
+        ...
+
+
+def model_sample(model: HumanModel, rng: np.random.Generator) -> dict[str, float]:
+    """One behaviour drawn from ``model``."""
+    return sample(model.dimensions, rng)
+
+
+def model_log_prob(model: HumanModel, values: Mapping[str, float]) -> float:
+    """The log-likelihood of a behaviour under ``model``."""
+    return log_prob(model.dimensions, values)
+
+
+def check_model(name: str, model: HumanModel, seed: int = 0) -> None:
+    """Draw :data:`CHECK_SAMPLES` behaviours and check that each has a finite log-likelihood.
+
+    Raises:
+        ModelError: A dimension's log-likelihood is not finite on one of its own draws.
+    """
+    rng = np.random.default_rng(seed)
+    for _ in range(CHECK_SAMPLES):
+        values = model_sample(model, rng)
+        for dim in model.dimensions:
+            value = dim.log_prob(values[dim.name])
+            if not math.isfinite(value):
+                raise ModelError(
+                    f"people model {name}: {dim.name}: log_prob is {value} on its own draw "
+                    f"{values[dim.name]!r}"
+                )
+
+
+@dataclass(frozen=True)
+class Place:
+    """Where people walk to."""
+
+    name: str
+    x: float
+    y: float
+
+
+@dataclass(frozen=True)
+class Walking:
+    """How a walker moves, besides what the model draws."""
+
+    look_distance: float = 3.0
+    """A person who looks waits while the robot comes towards them closer than this, in m."""
+    look_angle_deg: float = 60.0
+    """... within this angle of where they walk, in degrees."""
+    arrive_distance: float = 0.3
+    """A person this close to their place stands there, in m."""
+
+
+class WalkerModel:
+    """People who walk with a purpose between the floor's places (``people.toml``)."""
+
+    def __init__(self, scenario: Scenario, file: str | Path | None = None) -> None:
+        """Read the model for ``scenario``'s floor from ``file`` (the built-in one when None).
+
+        Raises:
+            ModelError: The file does not read, a distribution or a place is invalid, or it has
+                no places for the scenario's floor.
+        """
+        where, text = _model_text(file)
+        try:
+            data = loads_toml(text)
+        except TOMLDecodeError as error:
+            raise ModelError(f"{where}: not valid TOML: {error}") from None
+        unknown = sorted(set(data) - {"behaviour", "walking", "places"})
+        if unknown:
+            raise ModelError(f"{where}: unknown table(s) {', '.join(unknown)}")
+        behaviour = data.get("behaviour", {})
+        wanted = {"speed", "start_delay", "pauses", "pause_after", "pause_duration", "looks"}
+        if missing := sorted(wanted - set(behaviour)):
+            raise ModelError(f"{where}: behaviour: missing {', '.join(missing)}")
+        if extra := sorted(set(behaviour) - wanted):
+            raise ModelError(f"{where}: behaviour: unknown {', '.join(extra)}")
+        try:
+            dims = dimensions(f"{where}: behaviour", behaviour)
+        except DistributionError as error:
+            raise ModelError(str(error)) from None
+        self.walking = _walking(where, data.get("walking", {}))
+        self.places = _places(where, scenario, data.get("places", {}))
+        weights = [weight for _, weight in self.places]
+        destination = dimension(
+            where, "destination", {"distribution": "categorical", "weights": weights}
+        )
+        self.dimensions: tuple[Dimension, ...] = (*dims, destination)
+        self.source = where
+
+    def policy(self, values: Mapping[str, float], simulation: Simulation) -> Policy:
+        place, _ = self.places[int(values["destination"])]
+        return WalkerPolicy(values, place, self.walking, simulation)
+
+
+def _model_text(file: str | Path | None) -> tuple[str, str]:
+    if file is None:
+        text = resources.files("hazardhunt.likelihood").joinpath("people.toml").read_text()
+        return "people.toml (built-in)", text
+    path = Path(file)
+    try:
+        return str(path), path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise ModelError(f"{path}: cannot read the model of people: {error}") from None
+
+
+def _walking(where: str, table: Any) -> Walking:
+    if not isinstance(table, Mapping):
+        raise ModelError(f"{where}: walking: must be a table")
+    known = {"look_distance", "look_angle_deg", "arrive_distance"}
+    if extra := sorted(set(table) - known):
+        raise ModelError(f"{where}: walking: unknown {', '.join(extra)}")
+    for key, value in table.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
+            raise ModelError(f"{where}: walking: {key} must be a number >= 0, not {value!r}")
+    return Walking(**{key: float(value) for key, value in table.items()})
+
+
+def _places(where: str, scenario: Scenario, table: Any) -> list[tuple[Place, float]]:
+    floor = scenario.floor
+    entries = table.get(floor.name) if isinstance(table, Mapping) else None
+    if not entries:
+        raise ModelError(
+            f"{where}: no [[places.{floor.name}]] for the floor of scenario {scenario.name!r}: "
+            "write a model file with the places people walk to on it (docs/risk.md)"
+        )
+    places = []
+    for index, entry in enumerate(entries):
+        at = f"{where}: places.{floor.name}[{index}]"
+        if not isinstance(entry, Mapping) or set(entry) != {"name", "x", "y", "weight"}:
+            raise ModelError(f"{at}: must have exactly name, x, y and weight")
+        x, y, weight = entry["x"], entry["y"], entry["weight"]
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (x, y, weight)):
+            raise ModelError(f"{at}: x, y and weight must be numbers")
+        point = np.array([float(x), float(y)])
+        if not floor.on_floor(point) or floor.inside_obstacle(point):
+            raise ModelError(f"{at}: ({x}, {y}) is not on the free floor")
+        places.append((Place(str(entry["name"]), float(x), float(y)), float(weight)))
+    return places
+
+
+class WalkerPolicy:
+    """One walker's behaviour in an episode: stand until ``start_delay``, walk to the place
+    (round the shelves), pause once if ``pauses``, wait for the robot if ``looks``."""
+
+    def __init__(
+        self,
+        values: Mapping[str, float],
+        place: Place,
+        walking: Walking,
+        simulation: Simulation,
+    ) -> None:
+        self.target = np.array([place.x, place.y])
+        self.speed = float(values["speed"])
+        self.start = float(values["start_delay"])
+        pauses = round(values["pauses"]) == 1
+        pause_at = self.start + float(values["pause_after"])
+        self.pause = (pause_at, pause_at + float(values["pause_duration"])) if pauses else None
+        self.looks = round(values["looks"]) == 1
+        self.walking = walking
+        human = simulation.human_params
+        self.grid = simulation.scenario.floor.walk_grid(human.radius)
+        self.max_speed, self.max_turn = human.max_speed, human.max_turn_rate
+        self.period = simulation.decision_period
+
+    def __call__(self, simulation: Simulation) -> Action:
+        now = simulation.sim_time
+        if now < self.start - 1e-9:
+            return STAND
+        if self.pause is not None and self.pause[0] - 1e-9 <= now < self.pause[1] - 1e-9:
+            return STAND
+        x, y, heading = simulation.human_pose
+        here = np.array([x, y])
+        if math.hypot(*(self.target - here)) <= self.walking.arrive_distance:
+            return STAND
+        point, _ = self.grid.waypoint(here, self.target)
+        wanted = math.atan2(point[1] - y, point[0] - x)
+        error = (wanted - heading + math.pi) % math.tau - math.pi
+        turn = float(np.clip(error / (self.max_turn * self.period), -1.0, 1.0))
+        speed = self.speed * max(math.cos(error), 0.0)  # turn first, then walk
+        if self.looks and self._robot_coming(simulation, wanted):
+            speed = 0.0
+        return np.array([2.0 * speed / self.max_speed - 1.0, turn], dtype=np.float32)
+
+    def _robot_coming(self, simulation: Simulation, walking_to: float) -> bool:
+        """The robot moves and is near, within the look angle of where the person walks."""
+        robot, params = simulation.robot, simulation.robot_params
+        if robot.speed <= 0.05:
+            return False
+        x, y, _ = simulation.human_pose
+        cos, sin = math.cos(robot.heading), math.sin(robot.heading)
+        dx, dy = x - robot.x, y - robot.y
+        forward, left = cos * dx + sin * dy, -sin * dx + cos * dy
+        gap = point_rectangle_clearance(forward, left, params.length, params.width)
+        if gap > self.walking.look_distance:
+            return False
+        bearing = math.atan2(robot.y - y, robot.x - x)
+        off = abs((bearing - walking_to + math.pi) % math.tau - math.pi)
+        return off <= math.radians(self.walking.look_angle_deg)
+
+
+def load_model(spec: str | None, scenario: Scenario) -> HumanModel:
+    """The model of people ``spec`` names for ``scenario``: None or ``shopfloor`` for the
+    built-in one, a ``.toml`` file of the same form, or the import path of one's own
+    (``package.module:Class``, called as ``Class(scenario=...)``). Its log-likelihood is checked
+    on draws of its own (:func:`check_model`).
+
+    Raises:
+        ModelError: It does not load or its log-likelihood is not finite on its own draws.
+        PluginError: A plug-in does not load or lacks a member of :class:`HumanModel`.
+    """
+    if spec is None or spec == DEFAULT_MODEL:
+        model: HumanModel = WalkerModel(scenario)
+    elif spec.endswith(".toml"):
+        model = WalkerModel(scenario, spec)
+    else:
+        model = build("people model", spec, {"scenario": scenario}, HumanModel, [os.getcwd()])
+        dims = getattr(model, "dimensions", None)
+        if not isinstance(dims, Sequence) or not all(isinstance(d, Dimension) for d in dims):
+            raise ModelError(
+                f"people model {spec!r}: dimensions must be a sequence of "
+                "hazardhunt.likelihood.distributions.Dimension"
+            )
+    check_model(spec or DEFAULT_MODEL, model)
+    return model

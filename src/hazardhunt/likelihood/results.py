@@ -1,0 +1,148 @@
+"""What an estimate found: the probability of a failure per encounter, overall and per class,
+how it converged, the most likely failures, and what plain Monte Carlo would have needed.
+
+Everything here is computed from the episode table alone (each episode's failure, class, log
+likelihood and log likelihood ratio), so an estimate is recomputed from stored results.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
+from hazardhunt.likelihood.run import EstimateConfig, EstimateError
+
+TARGET_RELATIVE_ERROR = 0.3
+"""The relative error the comparison with plain Monte Carlo is stated at."""
+
+
+def summarise(config: EstimateConfig, table: pd.DataFrame) -> dict[str, Any]:
+    """The estimate of ``table``'s episodes, as ``estimate.json`` holds it.
+
+    Raises:
+        EstimateError: Every episode ended in a SUT error (nothing was tested), or a weight
+            overflows.
+    """
+    errors = int(table["sut_error"].sum())
+    if errors == len(table):
+        raise EstimateError(
+            f"every one of the {len(table)} episodes ended in a SUT error: nothing was tested, "
+            "no probability can be given"
+        )
+    counted = table[~table["adapting"]]
+    if counted.empty:
+        raise EstimateError(
+            "every batch was spent moving the proposal; give more episodes (or a larger "
+            "adapt_share) so that some are drawn from the final one"
+        )
+    failed = counted["failure"].to_numpy(bool)
+    log_w = counted["log_weight"].to_numpy(float)
+    defensive = counted["defensive"].to_numpy(float)
+    try:
+        overall = estimate(failed, log_w, defensive)
+        classes = {
+            name: estimate(counted["failure_class"].to_numpy() == name, log_w, defensive).record()
+            for name in sorted(set(table.loc[table["failure"], "failure_class"]))
+        }
+    except OverflowError as error:
+        raise EstimateError(f"the estimate cannot be computed: {error}") from None
+    return {
+        "scenario": config.scenario,
+        "field": config.field,
+        "method": config.estimator.method,
+        "episodes": len(table),
+        "episodes_counted": len(counted),
+        "sut_errors": errors,
+        "probability": overall.record(),
+        "classes": classes,
+        "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
+        "convergence": convergence(table),
+        "most_likely": most_likely(table),
+    }
+
+
+def monte_carlo_equivalent(result: Estimate, spent: int) -> dict[str, Any] | None:
+    """How many episodes plain Monte Carlo would need for this estimate's relative error (and
+    how many times the ``spent`` episodes, those that moved the proposal included), and for
+    :data:`TARGET_RELATIVE_ERROR`, at the estimated probability."""
+    p, relative = result.probability, result.relative_error
+    if p <= 0.0 or relative is None or relative <= 0.0:
+        return None
+    same = episodes_for(p, relative)
+    return {
+        "relative_error": relative,
+        "episodes_for_same_error": same,
+        "ratio": same / spent,
+        "episodes_for_target": episodes_for(p, TARGET_RELATIVE_ERROR),
+        "target_relative_error": TARGET_RELATIVE_ERROR,
+    }
+
+
+def convergence(table: pd.DataFrame) -> list[dict[str, float]]:
+    """The estimate after each batch: episodes, probability, interval."""
+    points = []
+    counted = table[~table["adapting"]]
+    for batch in sorted(set(counted["batch"])):
+        part = counted[counted["batch"] <= batch]
+        try:
+            result = estimate(
+                part["failure"].to_numpy(bool),
+                part["log_weight"].to_numpy(float),
+                part["defensive"].to_numpy(float),
+            )
+        except OverflowError:
+            continue
+        points.append(
+            {
+                "episodes": float(int(table.loc[table["batch"] <= batch].shape[0])),
+                "probability": result.probability,
+                "low": result.low,
+                "high": result.high,
+            }
+        )
+    return points
+
+
+def most_likely(table: pd.DataFrame) -> dict[str, Any]:
+    """The failure of highest likelihood under the model, overall and per class: its episode,
+    class and log-likelihood (replayable from its row)."""
+    failures = table[table["failure"]]
+    if failures.empty:
+        return {}
+    found: dict[str, Any] = {}
+    for name, group in [("all", failures), *failures.groupby("failure_class")]:
+        row = group.loc[group["log_p"].idxmax()]
+        found[str(name)] = {
+            "episode": int(row["episode"]),
+            "failure_class": str(row["failure_class"]),
+            "log_p": float(row["log_p"]),
+        }
+    return found
+
+
+def write_summary(directory: Path, summary: dict[str, Any]) -> Path:
+    """Write ``estimate.json`` (renamed into place once complete)."""
+    path = directory / "estimate.json"
+    partial = path.with_suffix(".json.partial")
+    partial.write_text(json.dumps(_finite(summary), indent=1) + "\n")
+    partial.replace(path)
+    return path
+
+
+def _finite(value: Any) -> Any:
+    """JSON has no infinities: they become None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.generic):
+        return _finite(value.item())
+    return value

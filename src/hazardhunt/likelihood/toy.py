@@ -1,0 +1,51 @@
+"""A test system whose failure probability is known in closed form, for validating estimators.
+
+Two standard normal numbers ``a`` and ``b`` and a Bernoulli ``looks`` (1 with probability
+``p_looks``) make an encounter; it fails when the person does not look and ``a + b`` reaches
+``threshold``, so the probability of a failure is ``(1 - p_looks) * (1 - Phi(threshold /
+sqrt(2)))``. Its score is ``a + b``, less 2 when the person looks, so that a search must find
+both the rare sum and the rare inattention.
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy import stats
+
+from hazardhunt.likelihood.distributions import dimension
+from hazardhunt.likelihood.encounters import Draw, Played
+
+
+class ClosedFormEncounters:
+    """Encounters with a known probability of failure (:attr:`probability`)."""
+
+    def __init__(self, threshold: float = 4.0, p_looks: float = 0.9) -> None:
+        self.threshold = threshold
+        self.p_looks = p_looks
+        normal = {"distribution": "normal", "mean": 0.0, "sd": 1.0}
+        self.dimensions = (
+            dimension("toy", "a", normal),
+            dimension("toy", "b", normal),
+            dimension("toy", "looks", {"distribution": "bernoulli", "p": p_looks}),
+        )
+
+    @property
+    def probability(self) -> float:
+        """The probability of a failure per encounter."""
+        return (1.0 - self.p_looks) * float(stats.norm.sf(self.threshold / math.sqrt(2.0)))
+
+    def play(self, draw: Draw) -> Played:
+        total = draw.values["a"] + draw.values["b"]
+        looks = round(draw.values["looks"]) == 1
+        score = total - 2.0 if looks else total
+        failure = score >= self.threshold
+        return Played(
+            outcome="failure" if failure else "goal",
+            failure=failure,
+            failure_class="sum" if failure else None,
+            score=score,
+            min_clearance=0.0,
+            sim_time=0.0,
+            sut_error=False,
+        )

@@ -1,0 +1,234 @@
+"""How likely a failure is: the people model and the SUT's uncertainties with exact likelihoods,
+episodes that replay from their draw, estimators whose intervals cover a known probability,
+estimates that resume, and bad input refused before anything runs."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from hazardhunt.likelihood.distributions import Dimension, DistributionError, dimension
+from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
+from hazardhunt.likelihood.estimators import EstimatorParams, clopper_pearson
+from hazardhunt.likelihood.people import ModelError, WalkerModel, load_model, model_sample
+from hazardhunt.likelihood.results import summarise
+from hazardhunt.likelihood.run import EstimateConfig, EstimateRun, draw_of
+from hazardhunt.likelihood.toy import ClosedFormEncounters
+from hazardhunt.likelihood.uncertainty import load_uncertainties
+from hazardhunt.sim.effects import SutEffects
+from hazardhunt.sim.simulation import Simulation
+from tests.helpers import hazardhunt
+
+ROOT = Path(__file__).parents[2]
+HERE = "tests.likelihood.test_likelihood"
+
+
+@pytest.mark.parametrize(
+    ("table", "says"),
+    [
+        ({"distribution": "gamma", "a": 1}, "distribution must be one of"),
+        ({"distribution": "normal", "mean": 0}, "normal needs sd"),
+        ({"distribution": "normal", "mean": 0, "sd": -1}, "sd must be > 0"),
+        ({"distribution": "uniform", "low": 2, "high": 1}, "low must be < high"),
+        ({"distribution": "bernoulli", "p": 1.5}, "p must be in [0, 1]"),
+        ({"distribution": "exponential", "mean": 1, "rate": 2}, "not rate"),
+    ],
+)
+def test_an_invalid_distribution_names_the_variable_and_the_problem(table, says):
+    with pytest.raises(DistributionError) as error:
+        dimension("people.toml: behaviour", "speed", table)
+    assert str(error.value).startswith("people.toml: behaviour: speed: ")
+    assert says in str(error.value)
+
+
+def walker_simulation(scenario="head-on", field="none"):
+    return Simulation.build(scenario, field, decision_period=0.2)
+
+
+def test_the_built_in_walkers_have_finite_likelihoods_and_walk_to_their_place():
+    simulation = walker_simulation("crossing")
+    model = load_model(None, simulation.scenario)
+    rng = np.random.default_rng(0)
+    values = model_sample(model, rng)
+    assert np.isfinite(sum(dim.log_prob(values[dim.name]) for dim in model.dimensions))
+    # Someone who sets off at once, never pauses and walks to the north end of the cross aisle
+    # (the third place) crosses the robot's aisle: they end north of it.
+    values.update(start_delay=0.0, pauses=0.0, looks=1.0, destination=2.0, speed=1.3)
+    result = simulation.simulate(model.policy(values, simulation))
+    assert result.summary.outcome in ("goal", "timeout")
+    assert simulation.human_pose[1] > 17.0
+
+
+def test_a_model_file_without_places_for_the_floor_is_refused(tmp_path):
+    text = (ROOT / "src/hazardhunt/likelihood/people.toml").read_text()
+    path = tmp_path / "people.toml"
+    path.write_text(text.replace("[[places.shopfloor]]", "[[places.other]]"))
+    with pytest.raises(ModelError, match=r"no \[\[places.shopfloor\]\]"):
+        WalkerModel(walker_simulation().scenario, path)
+
+
+class Elsewhere(Dimension):
+    """Draws from [0, 1], scores as if it drew from [2, 3]."""
+
+    def log_prob(self, value):
+        return float(stats.uniform(2.0, 1.0).logpdf(value))
+
+
+class ZeroLikelihood:
+    """A model whose every draw has likelihood zero under itself."""
+
+    def __init__(self, scenario):
+        table = {"distribution": "uniform", "low": 0.0, "high": 1.0}
+        self.dimensions = (Elsewhere("speed", stats.uniform(0.0, 1.0), table),)
+
+    def policy(self, values, simulation):
+        return lambda sim: np.array([-1.0, 0.0])
+
+
+def test_a_model_whose_likelihood_is_not_finite_on_its_own_draws_is_refused():
+    with pytest.raises(ModelError, match="speed: log_prob is -inf on its own draw"):
+        load_model(f"{HERE}:ZeroLikelihood", walker_simulation().scenario)
+
+
+def test_an_uncertainty_that_can_leave_its_range_is_refused(tmp_path):
+    path = tmp_path / "uncertainties.toml"
+    path.write_text(
+        '[effects]\ndropped_frames = { distribution = "normal", mean = 0.1, sd = 0.1 }\n'
+    )
+    with pytest.raises(ModelError, match="dropped_frames: its values must lie in"):
+        load_uncertainties(str(path))
+    path.write_text('[effects]\nwheel_slip = { distribution = "uniform", low = 0, high = 1 }\n')
+    with pytest.raises(ModelError, match="unknown wheel_slip"):
+        load_uncertainties(str(path))
+
+
+def test_nominal_effects_play_the_nominal_episode_and_effects_replay_exactly():
+    simulation = walker_simulation()
+    model = load_model(None, simulation.scenario)
+    values = model_sample(model, np.random.default_rng(3))
+    values.update(start_delay=0.0, looks=0.0, pauses=0.0, destination=0.0)  # walks at the robot
+    nominal = simulation.simulate(model.policy(values, simulation))
+    simulation.effects = SutEffects()
+    assert simulation.simulate(model.policy(values, simulation)).summary == nominal.summary
+    simulation.effects = SutEffects(0.08, 0.2, 0.05, 0.1, 3.0, seed=11)
+    noisy = simulation.simulate(model.policy(values, simulation))
+    again = simulation.simulate(model.policy(values, simulation))
+    assert noisy.summary != nominal.summary
+    assert again.summary == noisy.summary
+    assert np.array_equal(again.actions, noisy.actions)
+
+
+def test_a_weaker_brake_stops_later():
+    simulation = Simulation.build("head-on", "2m", decision_period=0.2)
+    stand = [np.array([-1.0, 0.0])] * 150
+    strong = simulation.simulate(stand)
+    simulation.effects = SutEffects(brake_deceleration=1.0)
+    weak = simulation.simulate(stand)
+    assert weak.summary.min_clearance < strong.summary.min_clearance
+
+
+def toy_estimate(tmp_path, seed, episodes=600, method="ce", source=None):
+    config = EstimateConfig(
+        episodes=episodes, seed=seed, estimator=EstimatorParams(method=method, batch_size=100)
+    )
+    table = EstimateRun(
+        config, tmp_path / f"toy-{seed}", source=source or ClosedFormEncounters()
+    ).run()
+    return config, table
+
+
+def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
+    toy = ClosedFormEncounters(threshold=3.5)
+    covered, estimates = 0, []
+    for seed in range(30):
+        config, table = toy_estimate(tmp_path, seed, episodes=1000, source=toy)
+        result = summarise(config, table)["probability"]
+        covered += result["low"] <= toy.probability <= result["high"]
+        estimates.append(result["probability"])
+    assert toy.probability < 1e-3  # rare: plain Monte Carlo at 1,000 episodes sees none mostly
+    assert covered >= 26  # the normal interval on weights: about 92 % measured
+    assert abs(np.mean(estimates) / toy.probability - 1.0) < 0.25
+
+
+def test_plain_monte_carlo_is_the_clopper_pearson_interval(tmp_path):
+    toy = ClosedFormEncounters(threshold=0.0, p_looks=0.5)  # p = 0.25
+    config, table = toy_estimate(tmp_path, 0, episodes=1000, method="mc", source=toy)
+    result = summarise(config, table)["probability"]
+    failures = int(table["failure"].sum())
+    assert result["probability"] == failures / 1000
+    assert (result["low"], result["high"]) == clopper_pearson(failures, 1000)
+    assert (table["log_weight"] == 0).all()
+
+
+def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path):
+    toy = ClosedFormEncounters()
+    config = EstimateConfig(episodes=500, seed=4, estimator=EstimatorParams(batch_size=100))
+    whole = EstimateRun(config, tmp_path / "whole", source=toy).run()
+
+    def stop_after_two(done, total):
+        if done >= 200:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        EstimateRun(config, tmp_path / "cut", source=toy).run(stop_after_two)
+    assert len(list((tmp_path / "cut" / "batches").glob("*.parquet"))) == 2
+    resumed = EstimateRun(config, tmp_path / "cut", source=toy).run()
+    pd.testing.assert_frame_equal(resumed, whole)
+
+
+def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
+    toy = ClosedFormEncounters()
+    EstimateRun(
+        EstimateConfig(episodes=300, estimator=EstimatorParams(batch_size=100)),
+        tmp_path,
+        source=toy,
+    )
+    other = EstimateConfig(episodes=300, seed=1, estimator=EstimatorParams(batch_size=100))
+    with pytest.raises(ValueError, match=r"another configuration .*seed"):
+        EstimateRun(other, tmp_path, source=toy)
+
+
+def test_a_failure_of_an_estimate_replays_exactly_from_its_row(tmp_path):
+    done = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--batch-size", 50, "--out", tmp_path / "est", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "failures per" in done.stdout
+    summary = json.loads((tmp_path / "est" / "estimate.json").read_text())
+    assert summary["probability"]["failures"] > 0
+    likeliest = summary["most_likely"]["all"]
+    table = pd.concat(
+        pd.read_parquet(p) for p in sorted((tmp_path / "est" / "batches").glob("*.parquet"))
+    )
+    row = table.set_index("episode").loc[likeliest["episode"]]
+    config = EstimateConfig.model_validate_json((tmp_path / "est" / "config.json").read_text())
+    from hazardhunt.likelihood.run import encounters_of
+
+    source: SimulationEncounters = encounters_of(config)
+    draw = draw_of(row, source.dimensions)
+    assert isinstance(draw, Draw)
+    replayed = source.play(draw)
+    assert replayed.outcome == "failure"
+    assert replayed.sim_time == row["sim_time"]
+    assert replayed.failure_class == likeliest["failure_class"]
+
+
+def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):
+    small = hazardhunt(
+        "estimate", "--episodes", 200, "--batch-size", 100, "--out", tmp_path / "small", cwd=ROOT
+    )
+    assert small.returncode == 2
+    assert "fewer than 3 batches" in small.stderr
+    assert not (tmp_path / "small").exists()
+    broken = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--batch-size", 50, "--out", tmp_path / "broken",
+        "--controller", "tests.campaign.test_nothing_tested:ResetRaises", cwd=ROOT,
+    )  # fmt: skip
+    assert broken.returncode == 1
+    assert "nothing was tested" in broken.stderr
+    assert not (tmp_path / "broken" / "estimate.json").exists()
