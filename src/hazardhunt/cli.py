@@ -710,7 +710,11 @@ def estimate_command(
     ] = "crossing",
     field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")] = "1.25m",
     method: Annotated[
-        str, typer.Option(help="ce (cross-entropy importance sampling) or mc (plain Monte Carlo).")
+        str,
+        typer.Option(
+            help="ce (cross-entropy importance sampling), splitting (multilevel splitting, for "
+            "rare failures) or mc (plain Monte Carlo)."
+        ),
     ] = "ce",
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 2000,
     batch_size: Annotated[int, typer.Option(help="Episodes per batch.")] = 200,
@@ -758,7 +762,7 @@ def estimate_command(
     with Progress(console=err_console, transient=True) as bar:
         task = bar.add_task(f"estimate ({method})", total=config.episodes)
         table = estimate_run.run(lambda done, total: bar.update(task, completed=done))
-    summary = summarise(config, table)
+    summary = summarise(config, table, estimate_run.source.threshold)
     path = write_summary(out, summary)
     _print_estimate(summary, path)
 

@@ -145,7 +145,7 @@ def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
     covered, estimates = 0, []
     for seed in range(30):
         config, table = toy_estimate(tmp_path, seed, episodes=1000, source=toy)
-        result = summarise(config, table)["probability"]
+        result = summarise(config, table, toy.threshold)["probability"]
         covered += result["low"] <= toy.probability <= result["high"]
         estimates.append(result["probability"])
     assert toy.probability < 1e-3  # rare: plain Monte Carlo at 1,000 episodes sees none mostly
@@ -153,10 +153,29 @@ def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
     assert abs(np.mean(estimates) / toy.probability - 1.0) < 0.25
 
 
+def test_splitting_reaches_a_rare_probability_with_few_episodes(tmp_path):
+    toy = ClosedFormEncounters(threshold=5.0, p_looks=0.0)  # p = 2e-4, no discrete dimension
+    covered, estimates, played = 0, [], []
+    for seed in range(20):
+        config = EstimateConfig(
+            episodes=2000,
+            seed=seed,
+            estimator=EstimatorParams(method="splitting", batch_size=300),
+        )
+        table = EstimateRun(config, tmp_path / f"split-{seed}", source=toy).run()
+        result = summarise(config, table, toy.threshold)["probability"]
+        covered += result["low"] <= toy.probability <= result["high"]
+        estimates.append(result["probability"])
+        played.append(len(table))
+    assert max(played) <= 2000
+    assert covered >= 17
+    assert abs(np.median(estimates) / toy.probability - 1.0) < 0.4
+
+
 def test_plain_monte_carlo_is_the_clopper_pearson_interval(tmp_path):
     toy = ClosedFormEncounters(threshold=0.0, p_looks=0.5)  # p = 0.25
     config, table = toy_estimate(tmp_path, 0, episodes=1000, method="mc", source=toy)
-    result = summarise(config, table)["probability"]
+    result = summarise(config, table, toy.threshold)["probability"]
     failures = int(table["failure"].sum())
     assert result["probability"] == failures / 1000
     assert (result["low"], result["high"]) == clopper_pearson(failures, 1000)

@@ -18,18 +18,20 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from scipy import stats
 
 from hazardhunt.likelihood.distributions import Dimension
+from hazardhunt.likelihood.encounters import Draw
 from hazardhunt.likelihood.proposal import Proposal
 
-Method = Literal["mc", "ce"]
-METHODS: tuple[Method, ...] = ("mc", "ce")
+Method = Literal["mc", "ce", "splitting"]
+METHODS: tuple[Method, ...] = ("mc", "ce", "splitting")
 CONFIDENCE = 0.95
 """Coverage of every interval."""
 MIN_EPISODES = 100
@@ -42,17 +44,87 @@ class EstimatorParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
     method: Method = "ce"
-    """``mc`` (plain Monte Carlo) or ``ce`` (cross-entropy importance sampling)."""
+    """``mc`` (plain Monte Carlo), ``ce`` (cross-entropy importance sampling) or
+    ``splitting`` (multilevel splitting in the model's parameters, :mod:`.splitting`)."""
     batch_size: int = Field(default=200, ge=10, le=100_000)
-    """Episodes per batch; the proposal may change between batches."""
+    """Episodes per batch; the proposal may change between batches (``splitting``: the
+    samples per level)."""
     elite_share: float = Field(default=0.1, gt=0.0, lt=1.0)
-    """``ce``: the share of a batch, highest scores first, the next proposal is fitted to."""
+    """``ce``: the share of a batch, highest scores first, the next proposal is fitted to;
+    ``splitting``: the share of a level's samples that seed the next level."""
+    correlation: float = Field(default=0.8, ge=0.0, lt=1.0)
+    """``splitting``: how much of a chain's state a move keeps (0: a new independent draw)."""
     smoothing: float = Field(default=0.7, gt=0.0, le=1.0)
     """``ce``: weight of a new fit against the proposal before it."""
     defensive: float = Field(default=0.1, gt=0.0, le=1.0)
     """``ce``: the model's share in every proposal (bounds each weight by 1 / defensive)."""
     adapt_share: float = Field(default=0.5, gt=0.0, lt=1.0)
     """``ce``: the largest share of the budget spent moving the proposal."""
+
+
+@dataclass(frozen=True)
+class PlannedBatch:
+    """The next batch an estimator plays: its draws, the columns it adds to each episode's row,
+    and how it was drawn (its ``NNNNN.json``)."""
+
+    draws: list[Draw]
+    columns: dict[str, list[Any]]
+    record: dict[str, Any]
+
+
+class Planner(Protocol):
+    """Chooses each batch from the batches played before it (so that a resumed estimate plays
+    the same batches)."""
+
+    def next_batch(self, tables: Sequence[pd.DataFrame]) -> PlannedBatch | None:
+        """The next batch, or None when the estimate is complete."""
+        ...
+
+
+class SamplingPlanner:
+    """Plain Monte Carlo and cross-entropy importance sampling: every batch drawn from a
+    proposal (:func:`next_proposal`)."""
+
+    def __init__(
+        self,
+        params: EstimatorParams,
+        dims: Sequence[Dimension],
+        threshold: float,
+        episodes: int,
+        seed: int,
+    ) -> None:
+        self.params, self.dims, self.threshold = params, tuple(dims), threshold
+        self.episodes, self.seed = episodes, seed
+
+    def next_batch(self, tables: Sequence[pd.DataFrame]) -> PlannedBatch | None:
+        played = sum(len(table) for table in tables)
+        if played >= self.episodes:
+            return None
+        schedule = next_proposal(
+            self.params,
+            self.dims,
+            [_batch_of(table, self.dims) for table in tables],
+            self.threshold,
+            self.episodes,
+        )
+        proposal = schedule.proposal
+        rng = np.random.default_rng([self.seed, len(tables)])
+        count = min(self.params.batch_size, self.episodes - played)
+        draws = [Draw(proposal.sample(rng), int(rng.integers(2**31))) for _ in range(count)]
+        columns: dict[str, list[Any]] = {
+            "log_weight": [proposal.log_weight(draw.values) for draw in draws],
+            "defensive": [proposal.defensive] * count,
+            "adapting": [schedule.adapting] * count,
+        }
+        return PlannedBatch(
+            draws, columns, {"level": schedule.level, "proposal": proposal.record()}
+        )
+
+
+def _batch_of(table: pd.DataFrame, dims: Sequence[Dimension]) -> Batch:
+    columns = table[[f"x.{dim.name}" for dim in dims]].to_numpy(float)
+    values = [{dim.name: float(v) for dim, v in zip(dims, row, strict=True)} for row in columns]
+    return Batch(values, table["log_weight"].to_numpy(float), table["score"].to_numpy(float))
 
 
 @dataclass(frozen=True)

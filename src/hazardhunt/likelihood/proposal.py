@@ -35,7 +35,12 @@ MIN_SHAPE = 0.2
 """The smallest Beta shape parameter a fit may give (a sharper tilt is refused)."""
 MAX_CONCENTRATION = 10.0
 """The largest sum of the Beta's shape parameters (how narrow a tilt may get)."""
-MIN_PROBABILITY = 1e-3
+MIN_PROBABILITY = 0.05
+"""The smallest share a discrete value keeps in a fitted tilt."""
+SPREAD = 0.1
+"""The share of a continuous dimension's tilt that stays uniform over its quantiles, so that
+no part of the model's range is left to the defensive mixture alone (a failure drawn far from
+where the tilt points would otherwise weigh up to ``1 / defensive``)."""
 """The smallest share a discrete value keeps in a fitted tilt."""
 
 
@@ -76,7 +81,8 @@ class Proposal:
                 )
             else:
                 a, b = self.shapes[dim.name]
-                u = float(np.clip(rng.beta(a, b), EDGE, 1.0 - EDGE))
+                draw = rng.random() if rng.random() < SPREAD else rng.beta(a, b)
+                u = float(np.clip(draw, EDGE, 1.0 - EDGE))
                 values[dim.name] = float(dim.distribution.ppf(u))
         return values
 
@@ -94,7 +100,8 @@ class Proposal:
                 if a == 1.0 and b == 1.0:
                     continue
                 u = float(np.clip(dim.distribution.cdf(value), EDGE, 1.0 - EDGE))
-                total += float(stats.beta.logpdf(u, a, b))
+                tilt = float(stats.beta.pdf(u, a, b))
+                total += math.log(SPREAD + (1.0 - SPREAD) * tilt)
         return total
 
     def log_weight(self, values: Mapping[str, float]) -> float:

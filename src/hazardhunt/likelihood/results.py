@@ -17,13 +17,15 @@ import pandas as pd
 
 from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
 from hazardhunt.likelihood.run import EstimateConfig, EstimateError
+from hazardhunt.likelihood.splitting import SplittingPlanner, splitting_estimate
 
 TARGET_RELATIVE_ERROR = 0.3
 """The relative error the comparison with plain Monte Carlo is stated at."""
 
 
-def summarise(config: EstimateConfig, table: pd.DataFrame) -> dict[str, Any]:
-    """The estimate of ``table``'s episodes, as ``estimate.json`` holds it.
+def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> dict[str, Any]:
+    """The estimate of ``table``'s episodes, as ``estimate.json`` holds it; ``threshold`` is the
+    score of a failure (the encounters' ``threshold``).
 
     Raises:
         EstimateError: Every episode ended in a SUT error (nothing was tested), or a weight
@@ -35,6 +37,31 @@ def summarise(config: EstimateConfig, table: pd.DataFrame) -> dict[str, Any]:
             f"every one of the {len(table)} episodes ended in a SUT error: nothing was tested, "
             "no probability can be given"
         )
+    classes_found = sorted(set(table.loc[table["failure"], "failure_class"]))
+    if config.estimator.method == "splitting":
+        overall, classes, points, counted = _splitting(config, table, classes_found, threshold)
+    else:
+        overall, classes, points, counted = _weighted(table, classes_found)
+    return {
+        "scenario": config.scenario,
+        "field": config.field,
+        "method": config.estimator.method,
+        "episodes": len(table),
+        "episodes_counted": counted,
+        "sut_errors": errors,
+        "probability": overall.record(),
+        "classes": classes,
+        "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
+        "convergence": points,
+        "most_likely": most_likely(table),
+    }
+
+
+def _weighted(
+    table: pd.DataFrame, classes_found: list[str]
+) -> tuple[Estimate, dict[str, Any], list[dict[str, float]], int]:
+    """Monte Carlo and importance sampling: the weighted mean over the episodes drawn once the
+    proposal stopped moving."""
     counted = table[~table["adapting"]]
     if counted.empty:
         raise EstimateError(
@@ -48,23 +75,40 @@ def summarise(config: EstimateConfig, table: pd.DataFrame) -> dict[str, Any]:
         overall = estimate(failed, log_w, defensive)
         classes = {
             name: estimate(counted["failure_class"].to_numpy() == name, log_w, defensive).record()
-            for name in sorted(set(table.loc[table["failure"], "failure_class"]))
+            for name in classes_found
         }
     except OverflowError as error:
         raise EstimateError(f"the estimate cannot be computed: {error}") from None
-    return {
-        "scenario": config.scenario,
-        "field": config.field,
-        "method": config.estimator.method,
-        "episodes": len(table),
-        "episodes_counted": len(counted),
-        "sut_errors": errors,
-        "probability": overall.record(),
-        "classes": classes,
-        "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
-        "convergence": convergence(table),
-        "most_likely": most_likely(table),
+    return overall, classes, convergence(table), len(counted)
+
+
+def _splitting(
+    config: EstimateConfig, table: pd.DataFrame, classes_found: list[str], threshold: float
+) -> tuple[Estimate, dict[str, Any], list[dict[str, float]], int]:
+    """Multilevel splitting: the product of the levels' shares."""
+    planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+    failed = table["failure"].to_numpy(bool)
+    overall, progress = splitting_estimate(planner, table, failed)
+    classes = {
+        name: splitting_estimate(planner, table, table["failure_class"].to_numpy() == name)[
+            0
+        ].record()
+        for name in classes_found
     }
+    points = []
+    for level in range(1, len(progress.levels) + 1):
+        end = planner.per_level + (level - 1) * planner.chains * planner.moves
+        part = table.iloc[:end]
+        result, _ = splitting_estimate(planner, part, part["failure"].to_numpy(bool))
+        points.append(
+            {
+                "episodes": float(end),
+                "probability": result.probability,
+                "low": result.low,
+                "high": result.high,
+            }
+        )
+    return overall, classes, points, len(table)
 
 
 def monte_carlo_equivalent(result: Estimate, spent: int) -> dict[str, Any] | None:

@@ -21,7 +21,6 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -39,13 +38,13 @@ from hazardhunt.likelihood.encounters import (
 )
 from hazardhunt.likelihood.estimators import (
     MIN_EPISODES,
-    Batch,
     EstimatorParams,
-    Schedule,
-    next_proposal,
+    PlannedBatch,
+    Planner,
+    SamplingPlanner,
 )
 from hazardhunt.likelihood.people import load_model
-from hazardhunt.likelihood.proposal import Proposal
+from hazardhunt.likelihood.splitting import SplittingPlanner
 from hazardhunt.likelihood.uncertainty import load_uncertainties
 from hazardhunt.processes import die_with_parent
 from hazardhunt.world.scenario import format_validation_error
@@ -72,15 +71,6 @@ class EstimateConfig(BaseModel):
     episodes: int = Field(default=2000, ge=MIN_EPISODES, le=10_000_000)
     seed: int = Field(default=0, ge=0, le=2**32 - 1)
 
-    def batches(self) -> int:
-        """Batches of the estimate (the last one may be short)."""
-        size = self.estimator.batch_size
-        return -(-self.episodes // size)
-
-    def batch_episodes(self, batch: int) -> int:
-        size = self.estimator.batch_size
-        return min(size, self.episodes - batch * size)
-
 
 class EstimateError(HazardhuntError):
     """An estimate that could not be done (every episode a SUT error, a weight that overflows)."""
@@ -90,14 +80,27 @@ def check_budget(config: EstimateConfig) -> None:
     """Refuse a budget too small for an interval.
 
     Raises:
-        InputError: ``ce`` with fewer than three batches (one to look, one to move, one to use).
+        InputError: ``ce`` with fewer than three batches (one to look, one to move, one to
+            use), ``splitting`` with too few episodes for two levels.
     """
-    if config.estimator.method == "ce" and config.batches() < 3:
+    size, method, episodes = config.estimator.batch_size, config.estimator.method, config.episodes
+    if method == "ce" and episodes < 3 * size:
         raise InputError(
-            f"episodes: {config.episodes} episodes in batches of {config.estimator.batch_size} "
-            "give cross-entropy importance sampling fewer than 3 batches; give at least "
-            f"{3 * config.estimator.batch_size} episodes or a smaller batch_size"
+            f"episodes: {episodes} episodes in batches of {size} give cross-entropy importance "
+            f"sampling fewer than 3 batches; give at least {3 * size} episodes or a smaller "
+            "--batch-size"
         )
+    if method == "splitting" and episodes < 2 * size:
+        raise InputError(
+            f"episodes: {episodes} episodes give splitting with {size} samples per level fewer "
+            f"than 2 levels; give at least {2 * size} episodes or a smaller --batch-size"
+        )
+
+
+def planner_of(config: EstimateConfig, dims: tuple[Dimension, ...], threshold: float) -> Planner:
+    """The estimator of ``config``, which chooses each batch."""
+    kind = SplittingPlanner if config.estimator.method == "splitting" else SamplingPlanner
+    return kind(config.estimator, dims, threshold, config.episodes, config.seed)
 
 
 def encounters_of(config: EstimateConfig) -> SimulationEncounters:
@@ -111,14 +114,6 @@ def encounters_of(config: EstimateConfig) -> SimulationEncounters:
     )
     model = load_model(config.people, simulation.scenario)
     return SimulationEncounters(simulation, model, load_uncertainties(config.uncertainties))
-
-
-def draws(config: EstimateConfig, batch: int, proposal: Proposal) -> list[Draw]:
-    """The draws of ``batch``: from its own generator, seeded by the estimate's seed and the
-    batch's number."""
-    rng = np.random.default_rng([config.seed, batch])
-    count = config.batch_episodes(batch)
-    return [Draw(proposal.sample(rng), int(rng.integers(2**31))) for _ in range(count)]
 
 
 class EstimateRun:
@@ -153,11 +148,8 @@ class EstimateRun:
 
     def played(self) -> list[pd.DataFrame]:
         """The finished batches, in order (stopping at the first missing one)."""
-        tables = []
-        for batch in range(self.config.batches()):
-            path = batch_path(self.directory, batch)
-            if not path.exists():
-                break
+        tables: list[pd.DataFrame] = []
+        while (path := batch_path(self.directory, len(tables))).exists():
             tables.append(pd.read_parquet(path))
         return tables
 
@@ -169,21 +161,14 @@ class EstimateRun:
         """
         tables = self.played()
         config = self.config
+        planner = planner_of(config, self.dimensions, self.source.threshold)
         try:
-            for batch in range(len(tables), config.batches()):
+            while (plan := planner.next_batch(tables)) is not None:
+                played = sum(len(t) for t in tables)
                 if progress is not None:
-                    progress(sum(len(t) for t in tables), config.episodes)
-                schedule = next_proposal(
-                    config.estimator,
-                    self.dimensions,
-                    [_batch_of(table, self.dimensions) for table in tables],
-                    self.source.threshold,
-                    config.episodes,
-                )
-                batch_draws = draws(config, batch, schedule.proposal)
-                played = self._play(batch_draws)
-                table = self._table(batch, batch_draws, schedule, played)
-                _write_batch(self.directory, batch, table, schedule.proposal, schedule.level)
+                    progress(played, config.episodes)
+                table = self._table(len(tables), played, plan, self._play(plan.draws))
+                _write_batch(self.directory, len(tables), table, plan.record)
                 tables.append(table)
         finally:
             self.close()
@@ -204,12 +189,10 @@ class EstimateRun:
         return list(self._pool.map(_play_in_worker, batch_draws, chunksize=4))
 
     def _table(
-        self, batch: int, batch_draws: Sequence[Draw], schedule: Schedule, played: Sequence[Played]
+        self, batch: int, first: int, plan: PlannedBatch, played: Sequence[Played]
     ) -> pd.DataFrame:
-        proposal = schedule.proposal
-        first = batch * self.config.estimator.batch_size
         rows = []
-        for i, (draw, outcome) in enumerate(zip(batch_draws, played, strict=True)):
+        for i, (draw, outcome) in enumerate(zip(plan.draws, played, strict=True)):
             log_p = sum(dim.log_prob(draw.values[dim.name]) for dim in self.dimensions)
             rows.append(
                 {
@@ -218,9 +201,7 @@ class EstimateRun:
                     **{f"x.{name}": value for name, value in draw.values.items()},
                     "noise_seed": draw.seed,
                     "log_p": log_p,
-                    "log_weight": proposal.log_weight(draw.values),
-                    "defensive": proposal.defensive,
-                    "adapting": schedule.adapting,
+                    **{name: column[i] for name, column in plan.columns.items()},
                     **played_row(outcome),
                 }
             )
@@ -241,24 +222,13 @@ def draw_of(row: Any, dims: Sequence[Dimension]) -> Draw:
     return Draw({dim.name: float(row[f"x.{dim.name}"]) for dim in dims}, int(row["noise_seed"]))
 
 
-def _batch_of(table: pd.DataFrame, dims: Sequence[Dimension]) -> Batch:
-    values = [
-        {dim.name: float(v) for dim, v in zip(dims, row, strict=True)}
-        for row in table[[f"x.{dim.name}" for dim in dims]].itertuples(index=False)
-    ]
-    return Batch(values, table["log_weight"].to_numpy(float), table["score"].to_numpy(float))
-
-
-def _write_batch(
-    directory: Path, batch: int, table: pd.DataFrame, proposal: Proposal, level: float | None
-) -> None:
-    """The batch's table and its proposal, each renamed into place once complete (the table
-    last: a batch counts as played when its table is there)."""
+def _write_batch(directory: Path, batch: int, table: pd.DataFrame, record: dict[str, Any]) -> None:
+    """The batch's table and how it was drawn, each renamed into place once complete (the
+    table last: a batch counts as played when its table is there)."""
     path = batch_path(directory, batch)
     path.parent.mkdir(parents=True, exist_ok=True)
-    record = {"batch": batch, "level": level, "proposal": proposal.record()}
     partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(record, indent=1) + "\n")
+    partial.write_text(json.dumps({"batch": batch, **record}, indent=1) + "\n")
     partial.replace(path.with_suffix(".json"))
     partial = path.with_suffix(".parquet.partial")
     table.to_parquet(partial, index=False)

@@ -1,10 +1,11 @@
 """A test system whose failure probability is known in closed form, for validating estimators.
 
 Two standard normal numbers ``a`` and ``b`` and a Bernoulli ``looks`` (1 with probability
-``p_looks``) make an encounter; it fails when the person does not look and ``a + b`` reaches
-``threshold``, so the probability of a failure is ``(1 - p_looks) * (1 - Phi(threshold /
-sqrt(2)))``. Its score is ``a + b``, less 2 when the person looks, so that a search must find
-both the rare sum and the rare inattention.
+``p_looks``) make an encounter. Its score is ``a + b``, less 2 when the person looks, and it
+fails when the score reaches ``threshold``: the sum is normal with variance 2, so the
+probability of a failure is ``(1 - p_looks) * Q(threshold / sqrt(2)) + p_looks *
+Q((threshold + 2) / sqrt(2))`` with ``Q`` the standard normal tail. A search must find both the
+rare sum and, mostly, the rare inattention.
 """
 
 from __future__ import annotations
@@ -33,7 +34,10 @@ class ClosedFormEncounters:
     @property
     def probability(self) -> float:
         """The probability of a failure per encounter."""
-        return (1.0 - self.p_looks) * float(stats.norm.sf(self.threshold / math.sqrt(2.0)))
+        tail = stats.norm.sf
+        inattentive = (1.0 - self.p_looks) * float(tail(self.threshold / math.sqrt(2.0)))
+        attentive = self.p_looks * float(tail((self.threshold + 2.0) / math.sqrt(2.0)))
+        return inattentive + attentive
 
     def play(self, draw: Draw) -> Played:
         total = draw.values["a"] + draw.values["b"]

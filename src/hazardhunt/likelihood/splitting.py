@@ -1,0 +1,213 @@
+"""Multilevel splitting in the model's parameters: subset simulation (Au and Beck 2001).
+
+A rare failure is reached through levels of the episode's score (its largest risk): the first
+level is plain Monte Carlo; the share ``p0`` of its episodes with the highest scores seeds
+Markov chains that explore, conditioned on reaching that score, the next level; and so on until
+the share ``p0`` of a level fails. The probability is the product of the levels' shares:
+
+    P(failure) = P(score >= l_1) * P(score >= l_2 | score >= l_1) * ... * P(failure | score >= l_m)
+
+The chains move in the model's standard-normal coordinates (each dimension's quantile ``u``
+as ``z = Phi^-1(u)``; a discrete dimension's value is its quantile function at ``u``), by the
+preconditioned Crank-Nicolson step ``z' = rho z + sqrt(1 - rho^2) xi``, which leaves the model
+unchanged; a move is kept when its episode reaches the level. Each move is one episode; a
+batch is one move of every chain. The interval is the log-normal one on the coefficient of
+variation of Au and Beck (their eq. 27-29: the levels' binomial variances, inflated by the
+correlation along each chain).
+
+The draw of every episode (its values and noise seed) is stored like any other's, so a
+failure replays from its row; the levels are recomputed from the stored scores.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from scipy import stats
+
+from hazardhunt.likelihood.distributions import Dimension
+from hazardhunt.likelihood.encounters import Draw
+from hazardhunt.likelihood.estimators import CONFIDENCE, Estimate, EstimatorParams, PlannedBatch
+
+EDGE = 1e-12
+"""Quantiles are kept this far inside (0, 1)."""
+
+
+def values_at(dims: Sequence[Dimension], z: NDArray[np.float64]) -> dict[str, float]:
+    """The model's values at standard-normal coordinates ``z``."""
+    u = np.clip(stats.norm.cdf(z), EDGE, 1.0 - EDGE)
+    return {dim.name: float(dim.distribution.ppf(q)) for dim, q in zip(dims, u, strict=True)}
+
+
+@dataclass
+class Level:
+    """The samples of one level: each chain's states, in order."""
+
+    threshold: float
+    """The score every sample of the level reached (-inf for the first)."""
+    states: list[list[int]]
+    """Per chain, the row of each of its states (a rejected move repeats the row)."""
+
+    def rows(self) -> list[int]:
+        return [row for chain in self.states for row in chain]
+
+
+@dataclass
+class Progress:
+    """Where a splitting estimate stands, recomputed from its played episodes."""
+
+    levels: list[Level]
+    next_threshold: float | None
+    """The level the running chains must reach; None before the first level is complete."""
+    done: bool
+    converged: bool
+    """The last level's share of failures reached ``p0`` (else the budget ran out first)."""
+
+
+class SplittingPlanner:
+    """Plays the levels of subset simulation."""
+
+    def __init__(
+        self,
+        params: EstimatorParams,
+        dims: Sequence[Dimension],
+        threshold: float,
+        episodes: int,
+        seed: int,
+    ) -> None:
+        self.params, self.dims, self.threshold = params, tuple(dims), threshold
+        self.episodes, self.seed = episodes, seed
+        self.per_level = params.batch_size
+        self.chains = max(1, round(params.batch_size * params.elite_share))
+        self.moves = max(1, math.ceil(params.batch_size / self.chains) - 1)
+        """Moves of each chain per level: a level has chains * (moves + 1) samples."""
+
+    def progress(self, table: pd.DataFrame) -> Progress:
+        """The levels of the episodes played so far (``table``, in order)."""
+        scores = table["score"].to_numpy(float) if len(table) else np.zeros(0)
+        if len(table) < self.per_level:
+            return Progress([], None, False, False)
+        levels = [Level(-math.inf, [[row] for row in range(self.per_level)])]
+        row = self.per_level
+        while True:
+            level = levels[-1]
+            rows = level.rows()
+            ranked = sorted(rows, key=lambda r: -scores[r])
+            cut = min(float(scores[ranked[self.chains - 1]]), self.threshold)
+            if float(np.mean(scores[rows] >= self.threshold)) >= self.params.elite_share:
+                return Progress(levels, None, True, True)
+            if row + self.chains * self.moves > self.episodes or cut <= level.threshold:
+                # No budget for another level, or the scores stopped rising.
+                return Progress(levels, None, True, False)
+            states = [[r] for r in ranked[: self.chains]]
+            for _ in range(self.moves):
+                if row + self.chains > len(table):
+                    return Progress([*levels, Level(cut, states)], cut, False, False)
+                for chain, proposed in zip(states, range(row, row + self.chains), strict=True):
+                    chain.append(proposed if scores[proposed] >= cut else chain[-1])
+                row += self.chains
+            levels.append(Level(cut, states))
+
+    def next_batch(self, tables: Sequence[pd.DataFrame]) -> PlannedBatch | None:
+        table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+        rng = np.random.default_rng([self.seed, len(tables)])
+        names = [dim.name for dim in self.dims]
+        if len(table) < self.per_level:  # the first level: plain Monte Carlo
+            z = rng.standard_normal((self.per_level, len(self.dims)))
+            return self._batch(z, rng, level=0, chains=[-1] * self.per_level, threshold=None)
+        state = self.progress(table)
+        if state.done:
+            return None
+        current = state.levels[-1]
+        z_now = table[[f"z.{name}" for name in names]].to_numpy(float)
+        rho = self.params.correlation
+        starts = np.array([z_now[chain[-1]] for chain in current.states])
+        moved = rho * starts + math.sqrt(1.0 - rho * rho) * rng.standard_normal(starts.shape)
+        return self._batch(
+            moved,
+            rng,
+            level=len(state.levels) - 1,
+            chains=list(range(len(current.states))),
+            threshold=state.next_threshold,
+        )
+
+    def _batch(
+        self,
+        z: NDArray[np.float64],
+        rng: np.random.Generator,
+        level: int,
+        chains: list[int],
+        threshold: float | None,
+    ) -> PlannedBatch:
+        draws = [Draw(values_at(self.dims, row), int(rng.integers(2**31))) for row in z]
+        columns: dict[str, list[Any]] = {
+            **{f"z.{dim.name}": z[:, i].tolist() for i, dim in enumerate(self.dims)},
+            "level": [level] * len(draws),
+            "chain": chains,
+        }
+        return PlannedBatch(draws, columns, {"level": level, "threshold": threshold})
+
+
+def splitting_estimate(
+    planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
+) -> tuple[Estimate, Progress]:
+    """The probability of ``event`` (a mark per row: failures, or failures of one class) from a
+    splitting estimate's episodes, with the log-normal interval on Au and Beck's coefficient of
+    variation."""
+    state = planner.progress(table)
+    scores = table["score"].to_numpy(float)
+    levels = state.levels
+    if not levels:
+        raise ValueError("the first level is not complete")
+    log_p, cv2, reached = 0.0, 0.0, 0.0
+    for index, level in enumerate(levels):
+        last = index == len(levels) - 1
+        if last:
+            marks = [[bool(event[r]) for r in chain] for chain in level.states]
+        else:
+            cut = levels[index + 1].threshold
+            marks = [[bool(scores[r] >= cut) for r in chain] for chain in level.states]
+        share = float(np.mean([m for chain in marks for m in chain]))
+        if share <= 0.0:
+            reached, log_p = log_p, -math.inf  # the levels before bound the probability
+            break
+        log_p += math.log(share)
+        count = sum(len(chain) for chain in marks)
+        gamma = 0.0 if index == 0 else _chain_correlation(marks, share)
+        cv2 += (1.0 - share) / (count * share) * (1.0 + gamma)
+    episodes, failures = len(table), int(table["failure"].sum())
+    if log_p == -math.inf:
+        bound = math.exp(reached)
+        kind = "no failure at the last level: bound by the levels reached"
+        return Estimate(0.0, 0.0, bound, episodes, failures, 0.0, None, 0.0, 0.0, kind), state
+    p = math.exp(log_p)
+    cv = math.sqrt(cv2)
+    z = float(stats.norm.ppf(0.5 + CONFIDENCE / 2.0))
+    spread = math.sqrt(math.log1p(cv2))
+    centre = log_p - 0.5 * spread**2
+    low, high = math.exp(centre - z * spread), min(math.exp(centre + z * spread), 1.0)
+    kind = "log-normal (Au and Beck)" if state.converged else "log-normal; not converged"
+    return Estimate(p, low, high, episodes, failures, p * cv, cv, math.nan, p, kind), state
+
+
+def _chain_correlation(marks: list[list[bool]], share: float) -> float:
+    """Au and Beck's factor ``gamma``: twice the weighted sum of the marks' autocorrelation
+    along the chains (all chains of a level have the same length)."""
+    indicator = np.array(marks, dtype=float)  # chains x length
+    chains, length = indicator.shape
+    total = chains * length
+    variance = share * (1.0 - share)
+    if variance <= 0.0 or length < 2:
+        return 0.0
+    gamma = 0.0
+    for lag in range(1, length):
+        products = indicator[:, :-lag] * indicator[:, lag:]
+        covariance = float(products.mean()) - share * share
+        gamma += 2.0 * (1.0 - lag * chains / total) * covariance / variance
+    return max(gamma, 0.0)
