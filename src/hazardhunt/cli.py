@@ -476,7 +476,7 @@ def campaign(
 
 @app.command()
 def report(
-    directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
+    directory: Annotated[Path, typer.Argument(help="A run, campaign or estimate directory.")],
     reclassify: Annotated[
         bool,
         typer.Option(
@@ -487,9 +487,20 @@ def report(
     classifier: ReadClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
 ) -> None:
-    """Write the study's figures and tables for a run or campaign into DIRECTORY/report."""
+    """Write the study's figures and tables for a run or campaign into DIRECTORY/report (for
+    an estimate: its probabilities, convergence and most likely failures)."""
     from hazardhunt.analysis.report import write_report
+    from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
+
+    if is_estimate(directory):
+        with Progress(console=console, transient=True) as progress:
+            task = progress.add_task("report", total=None)
+            index = write_estimate_report(
+                directory, lambda step: progress.update(task, description=f"report: {step}")
+            )
+        console.print(f"report written to [bold]{index.resolve()}[/bold]")
+        return
 
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None

@@ -210,7 +210,7 @@ def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
         EstimateRun(other, tmp_path, source=toy)
 
 
-def test_a_failure_of_an_estimate_replays_exactly_from_its_row(tmp_path):
+def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_draws_it(tmp_path):
     done = hazardhunt(
         "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
         "--episodes", 100, "--batch-size", 50, "--out", tmp_path / "est", cwd=ROOT,
@@ -234,6 +234,13 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row(tmp_path):
     assert replayed.outcome == "failure"
     assert replayed.sim_time == row["sim_time"]
     assert replayed.failure_class == likeliest["failure_class"]
+    shown = hazardhunt("report", tmp_path / "est", cwd=ROOT)
+    assert shown.returncode == 0, shown.stderr
+    page = (tmp_path / "est" / "report" / "index.html").read_text()
+    assert "How likely a failure is" in page
+    assert f"{summary['probability']['probability']:.3g}" in page
+    assert page.count("data:image/png") >= 2  # the convergence and a most likely failure
+    assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
 
 
 def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):

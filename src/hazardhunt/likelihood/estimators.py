@@ -10,7 +10,8 @@ the proposals were (each batch's proposal depends only on the batches before it)
 - ``ce``, cross-entropy importance sampling: the proposal moves, batch by batch, towards the
   episodes whose score (the episode's largest risk) reached a level that rises to a failure
   (:mod:`hazardhunt.likelihood.proposal`), then stays; the interval is the normal one on the
-  weighted mean (with no failure seen: the bound of :func:`zero_failure_bound`).
+  weighted mean, log-normal (:func:`log_normal_interval`; with no failure seen: the bound of
+  :func:`zero_failure_bound`).
 """
 
 from __future__ import annotations
@@ -273,10 +274,18 @@ def estimate(
             0.0, 0.0, zero_failure_bound(defensive), n, 0, 0.0, None, ess, 0.0, "no failure: bound"
         )
     se = float(terms.std(ddof=1) / math.sqrt(n)) if n > 1 else math.inf
+    low, high = log_normal_interval(p, se / p)
+    return Estimate(p, low, high, n, k, se, se / p, ess, normalised, "log-normal")
+
+
+def log_normal_interval(probability: float, relative_error: float) -> tuple[float, float]:
+    """The interval of coverage :data:`CONFIDENCE` of a log-normal with this mean and
+    coefficient of variation: skewed upwards as an estimate of a small probability from few
+    large weights is (a symmetric normal interval covers the truth less often than it says)."""
     z = float(stats.norm.ppf(0.5 + CONFIDENCE / 2.0))
-    return Estimate(
-        p, max(p - z * se, 0.0), min(p + z * se, 1.0), n, k, se, se / p, ess, normalised, "normal"
-    )
+    spread = math.sqrt(math.log1p(relative_error**2))
+    centre = math.log(probability) - 0.5 * spread**2
+    return math.exp(centre - z * spread), min(math.exp(centre + z * spread), 1.0)
 
 
 def episodes_for(probability: float, relative_error: float) -> float:

@@ -130,7 +130,10 @@ class Proposal:
             if dim.discrete:
                 index = np.searchsorted(dim.support, column)
                 counts = np.bincount(index, weights=w, minlength=len(dim.support))
-                counts = np.maximum(counts, MIN_PROBABILITY)
+                possible = (
+                    dim.distribution.pmf(dim.support) > 0
+                )  # a value the model never takes stays out
+                counts = np.where(possible, np.maximum(counts, MIN_PROBABILITY), 0.0)
                 fit = counts / counts.sum()
                 old = np.asarray(self.probabilities[dim.name])
                 new = smoothing * fit + (1.0 - smoothing) * old

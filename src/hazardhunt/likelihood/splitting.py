@@ -33,7 +33,12 @@ from scipy import stats
 
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.encounters import Draw
-from hazardhunt.likelihood.estimators import CONFIDENCE, Estimate, EstimatorParams, PlannedBatch
+from hazardhunt.likelihood.estimators import (
+    Estimate,
+    EstimatorParams,
+    PlannedBatch,
+    log_normal_interval,
+)
 
 EDGE = 1e-12
 """Quantiles are kept this far inside (0, 1)."""
@@ -188,10 +193,7 @@ def splitting_estimate(
         return Estimate(0.0, 0.0, bound, episodes, failures, 0.0, None, 0.0, 0.0, kind), state
     p = math.exp(log_p)
     cv = math.sqrt(cv2)
-    z = float(stats.norm.ppf(0.5 + CONFIDENCE / 2.0))
-    spread = math.sqrt(math.log1p(cv2))
-    centre = log_p - 0.5 * spread**2
-    low, high = math.exp(centre - z * spread), min(math.exp(centre + z * spread), 1.0)
+    low, high = log_normal_interval(p, cv)
     kind = "log-normal (Au and Beck)" if state.converged else "log-normal; not converged"
     return Estimate(p, low, high, episodes, failures, p * cv, cv, math.nan, p, kind), state
 

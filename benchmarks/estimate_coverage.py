@@ -1,0 +1,104 @@
+"""Do the estimators' 95 % intervals cover a probability known in closed form?
+
+Repeats each estimator on the closed-form test system (:mod:`hazardhunt.likelihood.toy`) with
+seeds 0, 1, ... and reports, per estimator and case, how often the interval covered the true
+probability, the estimates' mean and spread relative to it, the median reported relative
+error, the episodes played, and the episodes plain Monte Carlo would need for the spread
+measured (``(1 - p) / (p * spread^2)``).
+
+    python benchmarks/estimate_coverage.py --repetitions 200 \\
+        --out benchmarks/results/estimate_coverage.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from hazardhunt.likelihood.estimators import EstimatorParams, episodes_for
+from hazardhunt.likelihood.results import summarise
+from hazardhunt.likelihood.run import EstimateConfig, EstimateRun
+from hazardhunt.likelihood.toy import ClosedFormEncounters
+
+CASES = (
+    # (name, threshold, p_looks, method, episodes, batch size)
+    ("common, mc", 0.0, 0.5, "mc", 1000, 100),
+    ("rare with a discrete cause, ce", 3.5, 0.9, "ce", 1000, 100),
+    ("rare with a discrete cause, ce", 4.0, 0.9, "ce", 1000, 100),
+    ("rare, ce", 5.0, 0.0, "ce", 1000, 100),
+    ("rare, splitting", 5.0, 0.0, "splitting", 2000, 300),
+    ("rarer, splitting", 5.5, 0.0, "splitting", 3000, 500),
+)
+
+
+def repeat(threshold: float, p_looks: float, method: str, episodes: int, size: int, reps: int):
+    toy = ClosedFormEncounters(threshold=threshold, p_looks=p_looks)
+    truth = toy.probability
+    estimates, covered, reported, played = [], 0, [], []
+    for seed in range(reps):
+        config = EstimateConfig(
+            episodes=episodes,
+            seed=seed,
+            estimator=EstimatorParams(method=method, batch_size=size),  # type: ignore[arg-type]
+        )
+        with tempfile.TemporaryDirectory() as directory:
+            table = EstimateRun(config, Path(directory), source=toy).run()
+        result = summarise(config, table, toy.threshold)["probability"]
+        estimates.append(result["probability"])
+        covered += result["low"] <= truth <= result["high"]
+        reported.append(result["relative_error"] or 0.0)
+        played.append(len(table))
+    spread = float(np.std(estimates) / truth)
+    return {
+        "probability": truth,
+        "method": method,
+        "threshold": threshold,
+        "p_looks": p_looks,
+        "budget": episodes,
+        "repetitions": reps,
+        "coverage": covered / reps,
+        "mean_over_truth": float(np.mean(estimates) / truth),
+        "relative_spread": spread,
+        "median_reported_relative_error": float(np.median(reported)),
+        "median_episodes": float(np.median(played)),
+        "monte_carlo_episodes_for_spread": episodes_for(truth, spread) if spread > 0 else None,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repetitions", type=int, default=100)
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args()
+    started = time.perf_counter()
+    rows = []
+    for name, threshold, p_looks, method, episodes, size in CASES:
+        row = {"case": name, **repeat(threshold, p_looks, method, episodes, size, args.repetitions)}
+        rows.append(row)
+        print(
+            f"{name:34s} p={row['probability']:.3g} {method:9s} coverage {row['coverage']:.2f} "
+            f"mean/p {row['mean_over_truth']:.2f} spread {row['relative_spread']:.2f} "
+            f"reported {row['median_reported_relative_error']:.2f} "
+            f"episodes {row['median_episodes']:.0f} "
+            f"(plain Monte Carlo: {row['monte_carlo_episodes_for_spread'] or 0:,.0f})",
+            flush=True,
+        )
+    if args.out:
+        result = {
+            "command": " ".join([Path(sys.executable).name, *sys.argv]),
+            "date": datetime.now(UTC).isoformat(),
+            "wall_time_s": time.perf_counter() - started,
+            "cases": rows,
+        }
+        args.out.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

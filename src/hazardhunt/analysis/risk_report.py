@@ -1,0 +1,251 @@
+"""The report of an estimate (``hazardhunt report ESTIMATE_DIR``): how likely a failure is, per
+class, how the estimate converged against episodes, and the most likely failures drawn.
+
+The most likely failures are replayed from their draws against the estimate's SUT; an estimate
+that names a plug-in (controller, safety layer or model of people by import path) is data
+whose code is not run: its failures are listed, not drawn.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+import pandas as pd
+from markupsafe import Markup, escape
+from matplotlib.figure import Figure
+
+from hazardhunt.analysis.page import Prose, Section, Table, Text, image, render_page, table
+from hazardhunt.campaign.store import write_bytes_atomic
+from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode
+from hazardhunt.errors import InputError
+from hazardhunt.likelihood.encounters import Draw
+from hazardhunt.likelihood.run import (
+    EstimateConfig,
+    batch_path,
+    draw_of,
+    encounters_of,
+    load_config,
+)
+
+
+def is_estimate(directory: Path) -> bool:
+    """Whether ``directory`` holds an estimate (rather than a run or campaign)."""
+    return (directory / "config.json").is_file() and batch_path(directory, 0).parent.is_dir()
+
+
+def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = None) -> Path:
+    """Write ``report/index.html`` of the estimate in ``directory``; its path.
+
+    Raises:
+        InputError: The estimate is not finished (no ``estimate.json``: run the command again).
+    """
+    say = tell or (lambda step: None)
+    config = load_config(directory)
+    try:
+        summary = json.loads((directory / "estimate.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        raise InputError(
+            f"{directory}: the estimate is not finished (no estimate.json); run its "
+            "hazardhunt estimate command again to finish it"
+        ) from None
+    say("reading episodes")
+    episodes = pd.concat(
+        (pd.read_parquet(p) for p in sorted((directory / "batches").glob("*.parquet"))),
+        ignore_index=True,
+    )
+    final = directory / "report"
+    scratch = directory / ".report.partial"
+    shutil.rmtree(scratch, ignore_errors=True)
+    (scratch / "figures").mkdir(parents=True)
+    sections = [_probabilities(scratch, config, summary), _convergence(scratch, summary)]
+    # Class names are text, never matplotlib's mathtext.
+    with matplotlib.rc_context({"text.parse_math": False}):
+        sections.append(_most_likely(scratch, config, summary, episodes, say))
+    facts = (
+        f"{config.scenario}, field {config.field}, {summary['method']}, "
+        f"{summary['episodes']:,} episodes, seed {config.seed}"
+    )
+    write_bytes_atomic(
+        scratch / "index.html", render_page(directory, None, sections, facts).encode()
+    )
+    shutil.rmtree(final, ignore_errors=True)
+    scratch.replace(final)
+    return final / "index.html"
+
+
+def _table(scratch: Path, name: str, data: pd.DataFrame, caption: str = "") -> Table:
+    """``data`` shown on the page, with its CSV file beside it (``tables/NAME.csv``)."""
+    (scratch / "tables").mkdir(exist_ok=True)
+    data.to_csv(scratch / "tables" / f"{name}.csv", index=False)
+    return table(name, data, caption)
+
+
+def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any]) -> Section:
+    section = Section(
+        "How likely a failure is",
+        "The probability of an unsafe contact per encounter, when people behave as the model of "
+        "people says and the SUT's uncertainties vary as their model says (docs/risk.md).",
+    )
+    result = summary["probability"]
+    section.blocks.append(
+        Prose(
+            Markup(
+                "Probability of a failure per encounter: <b>{}</b>, 95 % interval [{}, {}] "
+                "({}; {} failures in {} episodes)."
+            ).format(
+                f"{result['probability']:.3g}",
+                f"{result['low']:.3g}",
+                f"{result['high']:.3g}",
+                result["interval"],
+                f"{result['failures']:,}",
+                f"{summary['episodes']:,}",
+            ),
+            "headline",
+        )
+    )
+    equivalent = summary.get("monte_carlo_equivalent")
+    if equivalent:
+        section.blocks.append(
+            Text(
+                f"Relative error {equivalent['relative_error']:.0%}: plain Monte Carlo would "
+                f"need about {equivalent['episodes_for_same_error']:,.0f} episodes for it, "
+                f"{equivalent['ratio']:.1f} times the {summary['episodes']:,} played here; "
+                f"for {equivalent['target_relative_error']:.0%} about "
+                f"{equivalent['episodes_for_target']:,.0f}."
+            )
+        )
+    if summary.get("sut_errors"):
+        section.blocks.append(
+            Text(f"{summary['sut_errors']:,} episodes ended in a SUT error.", "warning")
+        )
+    rows = [
+        {
+            "class": name,
+            "probability": part["probability"],
+            "low": part["low"],
+            "high": part["high"],
+            "failures": part["failures"],
+        }
+        for name, part in summary["classes"].items()
+    ]
+    if rows:
+        section.blocks.append(_table(scratch, "classes", pd.DataFrame(rows), "Per failure class"))
+    section.blocks.append(
+        Text(
+            f"People: {config.people or 'the built-in shop-floor walkers'}; uncertainties: "
+            f"{config.uncertainties or 'the built-in ones'}."
+        )
+    )
+    return section
+
+
+def _convergence(scratch: Path, summary: dict[str, Any]) -> Section:
+    section = Section(
+        "How the estimate converged",
+        "The estimate and its interval after each batch (level, for splitting) against the "
+        "episodes played so far.",
+    )
+    points = [p for p in summary["convergence"] if p["probability"] and p["probability"] > 0]
+    if not points:
+        section.blocks.append(Text("No failure yet: nothing to draw."))
+        return section
+    figure = Figure(figsize=(7, 4), dpi=110)
+    ax = figure.add_subplot()
+    x = [p["episodes"] for p in points]
+    ax.fill_between(
+        x,
+        [max(p["low"], 1e-300) for p in points],
+        [p["high"] for p in points],
+        alpha=0.25,
+        label="95 % interval",
+    )
+    ax.plot(x, [p["probability"] for p in points], marker="o", label="estimate")
+    ax.set_yscale("log")
+    ax.set_xlabel("episodes")
+    ax.set_ylabel("failures per encounter")
+    ax.legend()
+    figure.tight_layout()
+    path = scratch / "figures" / "convergence.png"
+    figure.savefig(path)
+    section.blocks.append(image(path, "The estimate against episodes"))
+    return section
+
+
+def _most_likely(
+    scratch: Path,
+    config: EstimateConfig,
+    summary: dict[str, Any],
+    episodes: pd.DataFrame,
+    say: Callable[[str], None],
+) -> Section:
+    section = Section(
+        "The most likely failures",
+        "Per class, the failing episode of highest likelihood under the model, replayed from "
+        "its draw.",
+    )
+    likeliest = summary.get("most_likely") or {}
+    if not likeliest:
+        section.blocks.append(Text("No failure was found."))
+        return section
+    rows = [
+        {"class": name, "episode": found["episode"], "log-likelihood": found["log_p"]}
+        for name, found in likeliest.items()
+    ]
+    section.blocks.append(_table(scratch, "most_likely", pd.DataFrame(rows)))
+    plugins = [config.controller, config.safety_layer]
+    if any(plugins) or (config.people is not None and ":" in config.people):
+        section.blocks.append(
+            Text(
+                "Not drawn: the estimate names plug-ins, whose code a report does not run. "
+                "Each failure's draw is its row in batches/ (columns x.*, noise_seed)."
+            )
+        )
+        return section
+    say("replaying the most likely failures")
+    source = encounters_of(config)
+    rows_by_episode = episodes.set_index("episode")
+    for name, found in likeliest.items():
+        draw: Draw = draw_of(rows_by_episode.loc[found["episode"]], source.dimensions)
+        result = source.episode(draw, keep_trajectory=True)
+        simulation = source.simulation
+        title = f"{name}: episode {found['episode']}"
+        samples = result.trajectory or ()
+        stem = f"likeliest-{found['episode']}"
+        picture = plot_episode(
+            scratch / "figures" / f"{stem}.png",
+            simulation.scenario,
+            simulation.route,
+            samples,
+            simulation.field,
+            title,
+            result.outcome,
+            simulation.robot_params,
+        )
+        section.blocks.append(image(picture, title))
+        recorded = RecordedEpisode(
+            simulation.scenario,
+            simulation.route,
+            simulation.field,
+            simulation.robot_params,
+            tuple(samples),
+        )
+        animation = animate_episode(
+            scratch / "figures" / f"{stem}.gif",
+            recorded,
+            title=name,
+            fps=5,
+            last_seconds=6.0,
+            size=4.5,
+        )
+        section.blocks.append(image(animation, f"{name}: the last 6 s"))
+        values = ", ".join(
+            f"{key} {value:.3g}" for key, value in draw.values.items() if math.isfinite(value)
+        )
+        section.blocks.append(Prose(Markup("Draw: {}").format(escape(values))))
+    return section
