@@ -20,11 +20,11 @@ import pandas as pd
 from markupsafe import Markup, escape
 from matplotlib.figure import Figure
 
-from hazardhunt.analysis.page import Prose, Section, Table, Text, image, render_page, table
+from hazardhunt.analysis.page import Block, Prose, Section, Table, Text, image, render_page, table
 from hazardhunt.campaign.store import write_bytes_atomic
 from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode
 from hazardhunt.errors import InputError
-from hazardhunt.likelihood.encounters import Draw
+from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     batch_path,
@@ -210,42 +210,46 @@ def _most_likely(
     say("replaying the most likely failures")
     source = encounters_of(config)
     rows_by_episode = episodes.set_index("episode")
+    drawn: set[int] = set()
     for name, found in likeliest.items():
-        draw: Draw = draw_of(rows_by_episode.loc[found["episode"]], source.dimensions)
-        result = source.episode(draw, keep_trajectory=True)
-        simulation = source.simulation
-        title = f"{name}: episode {found['episode']}"
-        samples = result.trajectory or ()
-        stem = f"likeliest-{found['episode']}"
-        picture = plot_episode(
-            scratch / "figures" / f"{stem}.png",
-            simulation.scenario,
-            simulation.route,
-            samples,
-            simulation.field,
-            title,
-            result.outcome,
-            simulation.robot_params,
-        )
-        section.blocks.append(image(picture, title))
-        recorded = RecordedEpisode(
-            simulation.scenario,
-            simulation.route,
-            simulation.field,
-            simulation.robot_params,
-            tuple(samples),
-        )
-        animation = animate_episode(
-            scratch / "figures" / f"{stem}.gif",
-            recorded,
-            title=name,
-            fps=5,
-            last_seconds=6.0,
-            size=4.5,
-        )
-        section.blocks.append(image(animation, f"{name}: the last 6 s"))
-        values = ", ".join(
-            f"{key} {value:.3g}" for key, value in draw.values.items() if math.isfinite(value)
-        )
-        section.blocks.append(Prose(Markup("Draw: {}").format(escape(values))))
+        if found["episode"] in drawn:  # the likeliest of all is also its class's
+            continue
+        drawn.add(found["episode"])
+        draw = draw_of(rows_by_episode.loc[found["episode"]], source.dimensions)
+        section.blocks += _drawn(scratch, source, draw, name, found["episode"])
     return section
+
+
+def _drawn(
+    scratch: Path, source: SimulationEncounters, draw: Draw, name: str, episode: int
+) -> list[Block]:
+    """One failure replayed from its draw: its tracks, its last seconds and its draw."""
+    result = source.episode(draw, keep_trajectory=True)
+    simulation = source.simulation
+    title = f"{name}: episode {episode}"
+    samples = tuple(result.trajectory or ())
+    stem = scratch / "figures" / f"likeliest-{episode}"
+    picture = plot_episode(
+        stem.with_suffix(".png"),
+        simulation.scenario,
+        simulation.route,
+        samples,
+        simulation.field,
+        title,
+        result.outcome,
+        simulation.robot_params,
+    )
+    recorded = RecordedEpisode(
+        simulation.scenario, simulation.route, simulation.field, simulation.robot_params, samples
+    )
+    animation = animate_episode(
+        stem.with_suffix(".gif"), recorded, title=name, fps=5, last_seconds=6.0, size=4.5
+    )
+    values = ", ".join(
+        f"{key} {value:.3g}" for key, value in draw.values.items() if math.isfinite(value)
+    )
+    return [
+        image(picture, title),
+        image(animation, f"{name}: the last 6 s"),
+        Prose(Markup("Draw: {}").format(escape(values))),
+    ]
