@@ -258,3 +258,43 @@ def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):
     assert broken.returncode == 1
     assert "nothing was tested" in broken.stderr
     assert not (tmp_path / "broken" / "estimate.json").exists()
+
+
+def test_a_weight_that_overflows_is_reported_not_dropped():
+    from hazardhunt.likelihood.estimators import estimate
+    from hazardhunt.likelihood.run import EstimateError
+
+    failed = np.array([True, False, True])
+    with pytest.raises(OverflowError, match=r"log weight 900\.0"):
+        estimate(failed, np.array([0.0, 900.0, 1.0]), np.ones(3))
+    table = pd.DataFrame(
+        {
+            "failure": failed,
+            "failure_class": ["a", "", "a"],
+            "log_weight": [0.0, 900.0, 1.0],
+            "defensive": [0.1] * 3,
+            "adapting": [False] * 3,
+            "sut_error": [False] * 3,
+            "batch": [0] * 3,
+            "episode": [0, 1, 2],
+            "log_p": [0.0] * 3,
+            "score": [100.0, 0.0, 100.0],
+        }
+    )
+    with pytest.raises(EstimateError, match="cannot be computed: a likelihood ratio overflows"):
+        summarise(EstimateConfig(), table, 100.0)
+
+
+@pytest.mark.slow
+def test_workers_play_the_same_episodes(tmp_path):
+    def estimate_with(workers):
+        config = EstimateConfig(
+            scenario="head-on",
+            field="none",
+            episodes=120,
+            estimator=EstimatorParams(method="mc", batch_size=40),
+        )
+        return EstimateRun(config, tmp_path / f"w{workers}", workers=workers).run()
+
+    one, two = estimate_with(1), estimate_with(2)
+    pd.testing.assert_frame_equal(one, two)
