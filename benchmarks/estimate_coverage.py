@@ -8,6 +8,7 @@ measured (``(1 - p) / (p * spread^2)``).
 
     python benchmarks/estimate_coverage.py --repetitions 200 \\
         --out benchmarks/results/estimate_coverage.json
+    python benchmarks/estimate_coverage.py --repetitions 200 --methods splitting
 """
 
 from __future__ import annotations
@@ -76,10 +77,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repetitions", type=int, default=100)
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--methods", nargs="*", default=None, help="Only these estimators.")
     args = parser.parse_args()
     started = time.perf_counter()
     rows = []
     for name, threshold, p_looks, method, episodes, size in CASES:
+        if args.methods and method not in args.methods:
+            continue
         row = {"case": name, **repeat(threshold, p_looks, method, episodes, size, args.repetitions)}
         rows.append(row)
         print(
