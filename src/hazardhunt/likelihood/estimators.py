@@ -180,6 +180,11 @@ def next_proposal(
             continue
         still = episodes < params.adapt_share * budget
         level = min(threshold, float(np.quantile(batch.scores, 1.0 - params.elite_share)))
+        failures = int(np.sum(np.concatenate(scores) >= threshold))
+        if failures >= params.elite_share * params.batch_size / 2:
+            # Enough failures found to fit to them alone: a score that jumps at a failure (a
+            # contact's risk is a hundred times a near miss's) makes the quantile rise slowly.
+            level = threshold
         if level <= 0.0:  # nothing scored: the next batch looks again
             schedule = Schedule(schedule.proposal, schedule.level, still)
             continue
