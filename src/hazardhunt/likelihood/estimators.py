@@ -59,6 +59,9 @@ class EstimatorParams(BaseModel):
     """``ce``: weight of a new fit against the proposal before it."""
     defensive: float = Field(default=0.1, gt=0.0, le=1.0)
     """``ce``: the model's share in every proposal (bounds each weight by 1 / defensive)."""
+    fit_failures: int = Field(default=5, ge=1, le=100_000)
+    """``ce``: once this many episodes so far have failed, the proposal is fitted to the
+    failures alone (before, to the best ``elite_share`` of the last batch and better)."""
     adapt_share: float = Field(default=0.5, gt=0.0, lt=1.0)
     """``ce``: the largest share of the budget spent moving the proposal."""
 
@@ -180,8 +183,7 @@ def next_proposal(
             continue
         still = episodes < params.adapt_share * budget
         level = min(threshold, float(np.quantile(batch.scores, 1.0 - params.elite_share)))
-        failures = int(np.sum(np.concatenate(scores) >= threshold))
-        if failures >= params.elite_share * params.batch_size / 2:
+        if int(np.sum(np.concatenate(scores) >= threshold)) >= params.fit_failures:
             # Enough failures found to fit to them alone: a score that jumps at a failure (a
             # contact's risk is a hundred times a near miss's) makes the quantile rise slowly.
             level = threshold
