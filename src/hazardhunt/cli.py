@@ -723,10 +723,11 @@ def estimate_command(
     method: Annotated[
         str,
         typer.Option(
-            help="ce (cross-entropy importance sampling), splitting (multilevel splitting, for "
-            "rare failures) or mc (plain Monte Carlo)."
+            help="mc (plain Monte Carlo), ce (cross-entropy importance sampling) or splitting "
+            "(multilevel splitting): the last two for rare failures, docs/risk.md says when to "
+            "trust them."
         ),
-    ] = "ce",
+    ] = "mc",
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 2000,
     batch_size: Annotated[int, typer.Option(help="Episodes per batch.")] = 200,
     seed: Annotated[int, typer.Option(help="Seed of the estimate.")] = 0,

@@ -184,7 +184,9 @@ def test_plain_monte_carlo_is_the_clopper_pearson_interval(tmp_path):
 
 def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path):
     toy = ClosedFormEncounters()
-    config = EstimateConfig(episodes=500, seed=4, estimator=EstimatorParams(batch_size=100))
+    config = EstimateConfig(
+        episodes=500, seed=4, estimator=EstimatorParams(method="ce", batch_size=100)
+    )
     whole = EstimateRun(config, tmp_path / "whole", source=toy).run()
 
     def stop_after_two(done, total):
@@ -201,11 +203,13 @@ def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path):
 def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
     toy = ClosedFormEncounters()
     EstimateRun(
-        EstimateConfig(episodes=300, estimator=EstimatorParams(batch_size=100)),
+        EstimateConfig(episodes=300, estimator=EstimatorParams(method="ce", batch_size=100)),
         tmp_path,
         source=toy,
     )
-    other = EstimateConfig(episodes=300, seed=1, estimator=EstimatorParams(batch_size=100))
+    other = EstimateConfig(
+        episodes=300, seed=1, estimator=EstimatorParams(method="ce", batch_size=100)
+    )
     with pytest.raises(ValueError, match=r"another configuration .*seed"):
         EstimateRun(other, tmp_path, source=toy)
 
@@ -245,8 +249,9 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
 
 def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):
     small = hazardhunt(
-        "estimate", "--episodes", 200, "--batch-size", 100, "--out", tmp_path / "small", cwd=ROOT
-    )
+        "estimate", "--method", "ce", "--episodes", 200, "--batch-size", 100,
+        "--out", tmp_path / "small", cwd=ROOT,
+    )  # fmt: skip
     assert small.returncode == 2
     assert "fewer than 3 batches" in small.stderr
     assert not (tmp_path / "small").exists()
