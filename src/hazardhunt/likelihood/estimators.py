@@ -1,18 +1,22 @@
 """Failure probabilities from weighted episodes, and the proposal each estimator plays next.
 
-Every estimator here plays batches of episodes drawn from a proposal and records each episode's
-exact log likelihood ratio ``log p(x) - log q(x)`` against the model; the probability of a
-failure per encounter is then the mean of ``w * 1[failure]`` over all episodes, unbiased whatever
-the proposals were (each batch's proposal depends only on the batches before it):
+Plain Monte Carlo and cross-entropy importance sampling play batches of episodes drawn from a
+proposal and record each episode's exact log likelihood ratio ``log p(x) - log q(x)`` against
+the model; the probability of a failure per encounter is the mean of ``w * 1[failure]`` over
+the episodes counted, unbiased whatever the proposal was (each batch's proposal depends only
+on the batches before it):
 
-- ``mc``, plain Monte Carlo: the proposal is the model, every weight 1; the interval is
-  Clopper-Pearson's (exact);
+- ``mc``, plain Monte Carlo: the proposal is the model, every weight 1, every episode counted;
+  the interval is Clopper-Pearson's (exact);
 - ``ce``, cross-entropy importance sampling: the proposal moves, batch by batch, towards the
-  episodes whose score (the episode's largest risk) reached a level that rises to a failure
-  (:mod:`hazardhunt.likelihood.proposal`), then stays; the interval is the normal one on the
-  weighted mean, log-normal (:func:`log_normal_interval`; with no failure seen: the bound of
+  episodes whose score (the episode's largest risk) reached a level that rises to a failure,
+  and then to the failures themselves (:mod:`hazardhunt.likelihood.proposal`); the episodes
+  drawn once it stopped moving are counted; the interval is log-normal on the weighted mean's
+  standard error (:func:`log_normal_interval`; with no failure seen: the bound of
   :func:`zero_failure_bound`).
-"""
+
+Multilevel splitting (:mod:`hazardhunt.likelihood.splitting`) plans its batches with the same
+:class:`Planner` protocol."""
 
 from __future__ import annotations
 
