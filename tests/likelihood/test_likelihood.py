@@ -13,7 +13,13 @@ from scipy import stats
 from hazardhunt.likelihood.distributions import Dimension, DistributionError, dimension
 from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
 from hazardhunt.likelihood.estimators import EstimatorParams, clopper_pearson
-from hazardhunt.likelihood.people import ModelError, WalkerModel, load_model, model_sample
+from hazardhunt.likelihood.people import (
+    ModelError,
+    WalkerModel,
+    load_model,
+    model_log_prob,
+    model_sample,
+)
 from hazardhunt.likelihood.results import summarise
 from hazardhunt.likelihood.run import EstimateConfig, EstimateRun, draw_of
 from hazardhunt.likelihood.toy import ClosedFormEncounters
@@ -53,7 +59,8 @@ def test_the_built_in_walkers_have_finite_likelihoods_and_walk_to_their_place():
     model = load_model(None, simulation.scenario)
     rng = np.random.default_rng(0)
     values = model_sample(model, rng)
-    assert np.isfinite(sum(dim.log_prob(values[dim.name]) for dim in model.dimensions))
+    assert np.isfinite(model_log_prob(model, values))
+    assert model_log_prob(model, {**values, "speed": 2.0}) == -np.inf  # faster than anyone walks
     # Someone who sets off at once, never pauses and walks to the north end of the cross aisle
     # (the third place) crosses the robot's aisle: they end north of it.
     values.update(start_delay=0.0, pauses=0.0, looks=1.0, destination=2.0, speed=1.3)
