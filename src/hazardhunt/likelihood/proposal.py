@@ -130,9 +130,8 @@ class Proposal:
             if dim.discrete:
                 index = np.searchsorted(dim.support, column)
                 counts = np.bincount(index, weights=w, minlength=len(dim.support))
-                possible = (
-                    dim.distribution.pmf(dim.support) > 0
-                )  # a value the model never takes stays out
+                # A value the model never takes stays out of the proposal.
+                possible = dim.distribution.pmf(dim.support) > 0
                 counts = np.where(possible, np.maximum(counts, MIN_PROBABILITY), 0.0)
                 fit = counts / counts.sum()
                 old = np.asarray(self.probabilities[dim.name])
