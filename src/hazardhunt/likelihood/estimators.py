@@ -91,9 +91,9 @@ class Planner(Protocol):
         ...
 
 
-class SamplingPlanner:
-    """Plain Monte Carlo and cross-entropy importance sampling: every batch drawn from a
-    proposal (:func:`next_proposal`)."""
+class PlannerBase:
+    """What every planner is given: the estimator, the model's dimensions, the failure's
+    score, the budget and the seed."""
 
     def __init__(
         self,
@@ -105,6 +105,11 @@ class SamplingPlanner:
     ) -> None:
         self.params, self.dims, self.threshold = params, tuple(dims), threshold
         self.episodes, self.seed = episodes, seed
+
+
+class SamplingPlanner(PlannerBase):
+    """Plain Monte Carlo and cross-entropy importance sampling: every batch drawn from a
+    proposal (:func:`next_proposal`)."""
 
     def next_batch(self, tables: Sequence[pd.DataFrame]) -> PlannedBatch | None:
         played = sum(len(table) for table in tables)

@@ -39,6 +39,7 @@ from hazardhunt.likelihood.estimators import (
     Estimate,
     EstimatorParams,
     PlannedBatch,
+    PlannerBase,
     log_normal_interval,
 )
 
@@ -77,7 +78,7 @@ class Progress:
     """The last level's share of failures reached ``p0`` (else the budget ran out first)."""
 
 
-class SplittingPlanner:
+class SplittingPlanner(PlannerBase):
     """Plays the levels of subset simulation."""
 
     def __init__(
@@ -88,8 +89,7 @@ class SplittingPlanner:
         episodes: int,
         seed: int,
     ) -> None:
-        self.params, self.dims, self.threshold = params, tuple(dims), threshold
-        self.episodes, self.seed = episodes, seed
+        super().__init__(params, dims, threshold, episodes, seed)
         self.per_level = params.batch_size
         self.chains = max(1, round(params.batch_size * params.elite_share))
         self.moves = max(1, math.ceil(params.batch_size / self.chains) - 1)
