@@ -29,18 +29,22 @@ from hazardhunt.likelihood.run import EstimateConfig, EstimateRun
 from hazardhunt.likelihood.toy import ClosedFormEncounters
 
 CASES = (
-    # (name, threshold, p_looks, method, episodes, batch size)
-    ("common, mc", 0.0, 0.5, "mc", 1000, 100),
-    ("rare with a discrete cause, ce", 3.5, 0.9, "ce", 1000, 100),
-    ("rare with a discrete cause, ce", 4.0, 0.9, "ce", 1000, 100),
-    ("rare, ce", 5.0, 0.0, "ce", 1000, 100),
-    ("rare, splitting", 5.0, 0.0, "splitting", 2000, 300),
-    ("rarer, splitting", 5.5, 0.0, "splitting", 3000, 500),
+    # (name, threshold, p_looks, idle variables, method, episodes, batch size)
+    ("common, mc", 0.0, 0.5, 0, "mc", 1000, 100),
+    ("rare with a discrete cause, ce", 3.5, 0.9, 0, "ce", 1000, 100),
+    ("rare with a discrete cause, ce", 4.0, 0.9, 0, "ce", 1000, 100),
+    ("rare, ce", 5.0, 0.0, 0, "ce", 1000, 100),
+    ("rare with a discrete cause, 9 idle, ce", 4.0, 0.9, 9, "ce", 1000, 100),
+    ("rare, 9 idle, ce", 5.0, 0.0, 9, "ce", 1000, 100),
+    ("rare, splitting", 5.0, 0.0, 0, "splitting", 2000, 300),
+    ("rarer, splitting", 5.5, 0.0, 0, "splitting", 3000, 500),
 )
 
 
-def repeat(threshold: float, p_looks: float, method: str, episodes: int, size: int, reps: int):
-    toy = ClosedFormEncounters(threshold=threshold, p_looks=p_looks)
+def repeat(
+    threshold: float, p_looks: float, idle: int, method: str, episodes: int, size: int, reps: int
+):
+    toy = ClosedFormEncounters(threshold=threshold, p_looks=p_looks, idle=idle)
     truth = toy.probability
     estimates, covered, reported, played = [], 0, [], []
     for seed in range(reps):
@@ -62,6 +66,7 @@ def repeat(threshold: float, p_looks: float, method: str, episodes: int, size: i
         "method": method,
         "threshold": threshold,
         "p_looks": p_looks,
+        "idle": idle,
         "budget": episodes,
         "repetitions": reps,
         "coverage": covered / reps,
@@ -81,13 +86,14 @@ def main() -> None:
     args = parser.parse_args()
     started = time.perf_counter()
     rows = []
-    for name, threshold, p_looks, method, episodes, size in CASES:
+    for name, threshold, p_looks, idle, method, episodes, size in CASES:
         if args.methods and method not in args.methods:
             continue
-        row = {"case": name, **repeat(threshold, p_looks, method, episodes, size, args.repetitions)}
+        played = repeat(threshold, p_looks, idle, method, episodes, size, args.repetitions)
+        row = {"case": name, **played}
         rows.append(row)
         print(
-            f"{name:34s} p={row['probability']:.3g} {method:9s} coverage {row['coverage']:.2f} "
+            f"{name:40s} p={row['probability']:.3g} {method:9s} coverage {row['coverage']:.2f} "
             f"mean/p {row['mean_over_truth']:.2f} spread {row['relative_spread']:.2f} "
             f"reported {row['median_reported_relative_error']:.2f} "
             f"episodes {row['median_episodes']:.0f} "

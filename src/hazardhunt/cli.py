@@ -160,6 +160,14 @@ SafetyLayerParamOption = Annotated[
 ClassifierParamOption = Annotated[
     list[str] | None, typer.Option(help="A classifier parameter as KEY=VALUE; repeatable.")
 ]
+RequirementOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        help="Judge every episode by this requirement too: a name of hazardhunt's library "
+        "(separation, slow-near-people, no-restart-in-field, reach-goal), a requirements file "
+        "(.toml, every requirement in it) or FILE.toml:NAME; repeatable.",
+    ),
+]
 RunClassifierOption = Annotated[
     str | None,
     typer.Option(
@@ -255,6 +263,7 @@ def run_command(
     classifier: RunClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
     sut_error_limit: SutErrorLimitOption = 1.0,
+    requirement: RequirementOption = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
@@ -290,6 +299,7 @@ def run_command(
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
             classifier=_plugin("--classifier", classifier, classifier_param),
             sut_error_limit=sut_error_limit,
+            requirements=requirement or [],
         )
     )
     check_plugins(config)
@@ -807,8 +817,11 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
             highlight=False,
         )
     if summary["sut_errors"]:
+        bound = summary["untested"]["failure_or_untested"]["high"]
         err_console.print(
-            f"[yellow]warning:[/yellow] {summary['sut_errors']:,} episodes ended in a SUT error"
+            f"[red]warning:[/red] {summary['sut_errors']:,} episodes ended in a SUT error and "
+            "tested nothing; counting them as failures, the probability of a failure is up to "
+            f"{bound:.3g}"
         )
     console.print(f"estimate: {escape(str(path))}", highlight=False)
 
@@ -854,6 +867,14 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             highlight=False,
         )
     faulty = summary.get("first_classifier_error")
+    for name, count in (summary.get("requirements") or {}).items():
+        violated_first = count["first_violation_episode"]
+        said = (
+            f"requirement {shown(name)}: {count['violations']:,} episodes violated it"
+            + ("" if violated_first is None else f", the first episode {violated_first}")
+            + f"; lowest robustness {count['min_robustness']:.3g}"
+        )
+        console.print(said, highlight=False)
     if faulty is not None:
         console.print(
             f"[red]warning: the failure classifier failed on {summary['classifier_errors']} "

@@ -11,7 +11,7 @@ import pytest
 from scipy import stats
 
 from hazardhunt.likelihood.distributions import Dimension, DistributionError, dimension
-from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
+from hazardhunt.likelihood.encounters import Draw, Played, SimulationEncounters
 from hazardhunt.likelihood.estimators import EstimatorParams, clopper_pearson
 from hazardhunt.likelihood.people import (
     ModelError,
@@ -20,6 +20,7 @@ from hazardhunt.likelihood.people import (
     model_log_prob,
     model_sample,
 )
+from hazardhunt.likelihood.proposal import Proposal
 from hazardhunt.likelihood.results import summarise
 from hazardhunt.likelihood.run import EstimateConfig, EstimateRun, draw_of
 from hazardhunt.likelihood.toy import ClosedFormEncounters
@@ -147,17 +148,53 @@ def toy_estimate(tmp_path, seed, episodes=600, method="ce", source=None):
     return config, table
 
 
-def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
-    toy = ClosedFormEncounters(threshold=3.5)
+def cross_entropy_repeated(tmp_path, toy, repetitions=30):
+    """How many of the repetitions' intervals covered the truth, and their estimates."""
     covered, estimates = 0, []
-    for seed in range(30):
+    for seed in range(repetitions):
         config, table = toy_estimate(tmp_path, seed, episodes=1000, source=toy)
         result = summarise(config, table, toy.threshold)["probability"]
         covered += result["low"] <= toy.probability <= result["high"]
         estimates.append(result["probability"])
+    return covered, estimates
+
+
+def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
+    toy = ClosedFormEncounters(threshold=3.5)
+    covered, estimates = cross_entropy_repeated(tmp_path, toy)
     assert toy.probability < 1e-3  # rare: plain Monte Carlo at 1,000 episodes sees none mostly
     assert covered >= 26  # the normal interval on weights: about 92 % measured
     assert abs(np.mean(estimates) / toy.probability - 1.0) < 0.25
+
+
+def test_cross_entropy_tilts_the_variables_that_matter_and_leaves_the_others():
+    toy = ClosedFormEncounters(threshold=4.0, p_looks=0.9, idle=4)
+    rng = np.random.default_rng(0)
+    draws = [draw_of_toy(toy, rng) for _ in range(5000)]
+    elites = [x for x in draws if x["a"] + x["b"] - 2.0 * x["looks"] >= 2.0]
+    start = Proposal.model(toy.dimensions)
+    fitted = start.fitted(elites, np.ones(len(elites)), 1.0, 0.1, penalty=2.0)
+    assert fitted.shapes["a"][0] > 2 * fitted.shapes["a"][1]  # towards large a
+    assert fitted.probabilities["looks"][0] > 0.5  # mostly inattentive
+    for name in ("idle0", "idle2"):
+        assert fitted.shapes[name] == (1.0, 1.0)
+    for name in ("idle1", "idle3"):
+        assert fitted.probabilities[name] == pytest.approx((0.8, 0.2))
+    # Without the penalty, the noise of the elites tilts them all.
+    loose = start.fitted(elites, np.ones(len(elites)), 1.0, 0.1, penalty=0.0)
+    assert all(loose.shapes[name] != (1.0, 1.0) for name in ("idle0", "idle2"))
+
+
+def draw_of_toy(toy, rng):
+    return {d.name: float(d.distribution.rvs(random_state=rng)) for d in toy.dimensions}
+
+
+@pytest.mark.slow
+def test_cross_entropy_covers_a_known_probability_among_idle_variables(tmp_path):
+    toy = ClosedFormEncounters(threshold=4.0, p_looks=0.9, idle=9)  # 12 variables, 3 matter
+    covered, estimates = cross_entropy_repeated(tmp_path, toy)
+    assert covered >= 26
+    assert abs(np.median(estimates) / toy.probability - 1.0) < 0.2
 
 
 def test_splitting_reaches_a_rare_probability_with_few_episodes(tmp_path):
@@ -252,6 +289,27 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert f"{summary['probability']['probability']:.3g}" in page
     assert page.count("data:image/png") >= 2  # the convergence and a most likely failure
     assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
+
+
+class SometimesCrashing(ClosedFormEncounters):
+    """A SUT that raises whenever the person's ``b`` is above 1 (about 16 % of encounters)."""
+
+    def play(self, draw):
+        if draw.values["b"] > 1.0:
+            return Played("sut_error", False, None, 0.0, 0.0, 0.0, True)
+        return super().play(draw)
+
+
+def test_episodes_the_sut_could_not_play_widen_the_probability_not_lower_it(tmp_path):
+    toy = SometimesCrashing(threshold=0.0, p_looks=0.5)
+    config, table = toy_estimate(tmp_path, 0, episodes=1000, method="mc", source=toy)
+    summary = summarise(config, table, toy.threshold)
+    errors = int(table["sut_error"].sum())
+    assert summary["sut_errors"] == errors > 100
+    untested = summary["untested"]
+    assert untested["probability"]["probability"] == pytest.approx(errors / 1000)
+    # Counted as failures, the encounters the SUT could not play raise the upper end.
+    assert untested["failure_or_untested"]["high"] > summary["probability"]["high"] + 0.1
 
 
 def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):

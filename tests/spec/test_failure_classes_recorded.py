@@ -15,15 +15,20 @@ RECORDED = json.loads((Path(__file__).parent / "recorded_failures.json").read_te
 NMPC = NMPCController()  # built once: construction is the expensive part
 
 
-@pytest.mark.parametrize("name", sorted(RECORDED))
-def test_a_recorded_human_reaches_the_class(name):
-    example = RECORDED[name]
-    simulation = Simulation.build(
+def recorded_simulation(example: dict) -> Simulation:
+    """The simulation a recorded failure was played on (with the shared NMPC)."""
+    return Simulation.build(
         example["scenario"],
         example["field"],
         decision_period=example["decision_period"],
         controller=NMPC,
     )
+
+
+@pytest.mark.parametrize("name", sorted(RECORDED))
+def test_a_recorded_human_reaches_the_class(name):
+    example = RECORDED[name]
+    simulation = recorded_simulation(example)
     result = simulation.simulate(np.asarray(example["actions"], dtype=np.float32))
     assert result.outcome == "failure"
     assert result.summary.sim_time == pytest.approx(example["sim_time"])

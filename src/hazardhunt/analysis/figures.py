@@ -162,6 +162,26 @@ def failure_rates_figure(rates: pd.DataFrame, path: Path) -> Path:
     return _save(figure, path)
 
 
+def robustness_figure(robustness: pd.DataFrame, path: Path) -> Path:
+    """Each requirement's robustness over the episodes (one panel per requirement, one
+    histogram per tester); left of the line at 0 the episodes violated it."""
+    names = list(dict.fromkeys(robustness["requirement"]))
+    figure = Figure(figsize=(4.2 * len(names), 3.2), dpi=100)
+    for column, name in enumerate(names):
+        ax = figure.add_subplot(1, len(names), column + 1)
+        mine = robustness[robustness["requirement"] == name]
+        edges = np.histogram_bin_edges(mine["robustness"], bins=30).tolist()
+        for tester in sort_testers(mine["tester"]):
+            values = mine.loc[mine["tester"] == tester, "robustness"]
+            ax.hist(values, bins=edges, histtype="step", color=colour_of(tester), label=tester)
+        ax.axvline(0.0, color="black", linewidth=0.8)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("robustness (below 0: violated)")
+        ax.set_ylabel("episodes")
+        ax.legend(fontsize=7)
+    return _save(figure, path)
+
+
 CLUSTER_MARKERS = "osD^v<>phP*X"
 """One marker per cluster id (cycled); unclustered failures are small crosses."""
 

@@ -45,6 +45,7 @@ from hazardhunt.campaign.replay import (
     replay_actions,
 )
 from hazardhunt.campaign.store import (
+    REQUIREMENT_COLUMN,
     left_out,
     read_trajectory,
     write_bytes_atomic,
@@ -170,6 +171,7 @@ def _write_sections(report: _Report, results: Results, tell: Progress) -> None:
     _representatives(report, results)
     tell("failure rates")
     _rates(report, results)
+    _requirements(report, results)
     _runs(report, results)
     tell("verdict")
     _verdict(report, results)
@@ -538,6 +540,33 @@ def _rates(report: _Report, results: Results) -> None:
     path = figures.failure_rates_figure(rates, report.figures / "failure_rates.png")
     report.image(section, path, "Failure rate with its 95 % confidence interval")
     report.table(section, "failure_rates", rates)
+
+
+def _requirements(report: _Report, results: Results) -> None:
+    """Violations and robustness of the requirements beyond the contact rule, when the runs
+    judged their episodes by any (``docs/requirements.md``)."""
+    columns = [c for c in results.episodes.columns if str(c).startswith(REQUIREMENT_COLUMN)]
+    if not columns:
+        return
+    section = report.section(
+        "Requirements beyond the contact rule",
+        "Every episode's robustness for each requirement the runs judged it by: the margin by "
+        "which it kept the requirement, negative when it violated it (docs/requirements.md).",
+    )
+    keys = ["scenario", "field", "tester"]
+    long = results.episodes.melt(
+        id_vars=keys, value_vars=columns, var_name="requirement", value_name="robustness"
+    ).dropna(subset=["robustness"])
+    long["requirement"] = long["requirement"].str.removeprefix(REQUIREMENT_COLUMN)
+    path = figures.robustness_figure(long, report.figures / "robustness.png")
+    report.image(section, path, "Robustness per requirement and tester (seeds pooled)")
+    grouped = long.groupby([*keys, "requirement"], sort=False)["robustness"]
+    table = grouped.agg(
+        episodes="size",
+        violations=lambda r: int((r < 0).sum()),
+        lowest_robustness="min",
+    ).reset_index()
+    report.table(section, "requirements", table)
 
 
 def _runs(report: _Report, results: Results) -> None:

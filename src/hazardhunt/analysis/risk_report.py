@@ -86,6 +86,16 @@ def _table(scratch: Path, name: str, data: pd.DataFrame, caption: str = "") -> T
     return table(name, data, caption)
 
 
+def _untested(summary: dict[str, Any]) -> str:
+    """What the episodes the SUT could not play mean for the probability."""
+    untested = summary.get("untested") or {}
+    bound = (untested.get("failure_or_untested") or {}).get("high")
+    said = f"{summary['sut_errors']:,} episodes ended in a SUT error and tested nothing"
+    if isinstance(bound, float):
+        said += f"; counting them as failures, the probability of a failure is up to {bound:.3g}"
+    return said + "."
+
+
 def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any]) -> Section:
     section = Section(
         "How likely a failure is",
@@ -121,9 +131,7 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
             )
         )
     if summary.get("sut_errors"):
-        section.blocks.append(
-            Text(f"{summary['sut_errors']:,} episodes ended in a SUT error.", "warning")
-        )
+        section.blocks.append(Text(_untested(summary), "warning"))
     rows = [
         {
             "class": name,

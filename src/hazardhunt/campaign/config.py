@@ -41,6 +41,7 @@ from hazardhunt.campaign.plugins import (
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import SimulationSettings, decisions_in, whole_multiple
 from hazardhunt.spec.outcomes import TerminationParams
+from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
@@ -315,6 +316,15 @@ class RunConfig(_Strict):
     sut_error_limit: SutErrorLimit = 1.0
     """The run fails (its results are not kept) once this share of its episodes has ended in
     ``sut_error``; 1: when every one did."""
+    requirements: list[str] = []
+    """Requirements beyond the contact rule every episode is judged by: names of hazardhunt's
+    library, requirements files, or ``FILE.toml:NAME`` (``docs/requirements.md``)."""
+
+    @field_validator("requirements")
+    @classmethod
+    def _requirements_read(cls, value: list[str]) -> list[str]:
+        requirements_of(value)  # a formula that cannot be monitored stops the run here
+        return value
 
     @field_validator("field")
     @classmethod
@@ -387,6 +397,15 @@ class CampaignConfig(_Strict):
     sut_error_limit: SutErrorLimit = 1.0
     """A run fails once this share of its episodes has ended in ``sut_error`` (see
     :attr:`RunConfig.sut_error_limit`)."""
+    requirements: list[str] = []
+    """Requirements beyond the contact rule every run judges its episodes by (see
+    :attr:`RunConfig.requirements`); a file is found next to the campaign file."""
+
+    @field_validator("requirements")
+    @classmethod
+    def _requirements_read(cls, value: list[str]) -> list[str]:
+        requirements_of(value)
+        return value
 
     @field_validator("fields")
     @classmethod
@@ -476,6 +495,7 @@ class CampaignConfig(_Strict):
                 safety_layer=self.safety_layer,
                 classifier=self.classifier,
                 sut_error_limit=self.sut_error_limit,
+                requirements=self.requirements,
             )
             for scenario in self.scenarios
             for field in self.fields
@@ -536,6 +556,15 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
             if isinstance(name, str) and name.endswith(".toml") and not Path(name).is_absolute()
             else name
             for name in scenarios
+        ]
+    requirements = data.get("requirements")
+    if isinstance(requirements, list):
+        # A requirements file named in a campaign file is found next to the campaign file.
+        data["requirements"] = [
+            str(path.parent / name)
+            if isinstance(name, str) and ".toml" in name and not Path(name).is_absolute()
+            else name
+            for name in requirements
         ]
     if classifier is not None:
         data["classifier"] = classifier.model_dump()

@@ -14,6 +14,15 @@ class FirstError(TypedDict):
     error: str
 
 
+class RequirementCount(TypedDict):
+    """How a run's episodes stood against one requirement beyond the contact rule."""
+
+    violations: int
+    first_violation_episode: int | None
+    min_robustness: float
+    """The lowest robustness of any episode (negative: the worst violation's depth)."""
+
+
 class RunSummary(TypedDict, total=False):
     """A run's ``summary.json`` (:func:`hazardhunt.campaign.run.record_run` writes every key;
     runs recorded by earlier versions may lack the later ones)."""
@@ -41,6 +50,7 @@ class RunSummary(TypedDict, total=False):
     classes: list[str]
     classes_found: int
     classes_total: int
+    requirements: dict[str, RequirementCount]
     wall_time_s: float
     episodes_per_s: float
     started_at: str

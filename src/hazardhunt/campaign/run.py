@@ -18,7 +18,7 @@ import json
 import platform
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -51,6 +51,7 @@ from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError, PluginError
 from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
+from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
@@ -79,8 +80,11 @@ def build_simulation(
     options: EnvOptions,
     controller: PluginSpec | None = None,
     safety_layer: PluginSpec | None = None,
+    requirements: Sequence[str] = (),
 ) -> Simulation:
-    """The simulation a run's settings describe: the built-in SUT unless plug-ins are given.
+    """The simulation a run's settings describe: the built-in SUT unless plug-ins are given,
+    judging each episode by ``requirements`` too (names of the library's or files,
+    :func:`~hazardhunt.spec.requirements.requirements_of`).
 
     Raises:
         PluginError: A plug-in does not load.
@@ -88,7 +92,7 @@ def build_simulation(
             controller's, a controller period that is not a multiple of the physics step).
     """
     try:
-        return Simulation.build(
+        simulation = Simulation.build(
             scenario,
             field,
             options.settings(),
@@ -97,12 +101,21 @@ def build_simulation(
         )
     except PeriodError as error:
         raise ConfigError(str(error)) from None
+    if requirements:
+        period = simulation.controller.control_period
+        simulation.requirements = requirements_of(list(requirements), period)
+    return simulation
 
 
 def simulation_of(config: RunConfig) -> Simulation:
     """The simulation of a run's configuration."""
     return build_simulation(
-        config.scenario, config.field, config.env, config.controller, config.safety_layer
+        config.scenario,
+        config.field,
+        config.env,
+        config.controller,
+        config.safety_layer,
+        config.requirements,
     )
 
 
@@ -267,6 +280,7 @@ def _run_summary(
         "classes": store.classes,
         "classes_found": len(set(store.classes) - {OTHER}),
         "classes_total": len(classifier.classes_for(field)) - 1,
+        "requirements": store.requirement_summary(),
         "wall_time_s": wall_time,
         "episodes_per_s": len(outcomes) / wall_time if wall_time > 0 else 0.0,
         "started_at": started_at,

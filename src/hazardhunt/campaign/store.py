@@ -33,7 +33,12 @@ from typing import Any
 import pandas as pd
 import pyarrow.parquet as pq
 
-from hazardhunt.campaign.records import CampaignTotals, FirstError, LedgerEntry
+from hazardhunt.campaign.records import (
+    CampaignTotals,
+    FirstError,
+    LedgerEntry,
+    RequirementCount,
+)
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -50,6 +55,10 @@ from hazardhunt.testers.base import EpisodeRecord
 EPISODE_COLUMNS = ("episode", *SUMMARY_COLUMNS, *TIMING_COLUMNS, "loitering")
 """Columns of ``episodes.parquet``: the episode's index, its summary, its wall-clock timing
 and whether it loitered (reward hacking)."""
+
+REQUIREMENT_COLUMN = "requirement:"
+"""The prefix of ``episodes.parquet``'s columns that hold each requirement's robustness
+(``requirement:separation``), when the run has requirements beyond the contact rule."""
 
 FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_face", "max_risk")
 """Columns of ``failures.parquet`` taken from the episode summary (besides the replay keys)."""
@@ -243,6 +252,9 @@ class RunStore:
         """Failures the classifier raised on or gave no class name for (recorded as ``other``)."""
         self.first_classifier_error: FirstError | None = None
         """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
+        self.requirements: dict[str, RequirementCount] = {}
+        """Each requirement's violations so far (the run's requirements beyond the contact
+        rule)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
         self._parts = 0
@@ -254,6 +266,9 @@ class RunStore:
         summary = result.summary
         row = {"episode": episode, **summary.as_row(), **dataclasses.asdict(result.timing)}
         row["loitering"] = self.loitering_rule.matches(summary)
+        for name, verdict in result.verdicts.items():
+            row[REQUIREMENT_COLUMN + name] = verdict.robustness
+            self._count(name, episode, verdict.robustness)
         self.episodes.append(row)
         if summary.outcome == "sut_error":
             self.sut_error_count += 1
@@ -318,10 +333,25 @@ class RunStore:
         found = {row["class"] for row in self.failures}
         return [name for name in self.classifier.classes_for(self.field) if name in found]
 
+    def _count(self, name: str, episode: int, robustness: float) -> None:
+        count = self.requirements.setdefault(
+            name, {"violations": 0, "first_violation_episode": None, "min_robustness": robustness}
+        )
+        count["min_robustness"] = min(count["min_robustness"], robustness)
+        if robustness < 0.0:
+            count["violations"] += 1
+            if count["first_violation_episode"] is None:
+                count["first_violation_episode"] = episode
+
+    def requirement_summary(self) -> dict[str, RequirementCount]:
+        """Each requirement's violations, first violating episode and lowest robustness."""
+        return {name: RequirementCount(**count) for name, count in self.requirements.items()}
+
     def close(self) -> None:
         """Write the tables."""
         self._flush_trajectories()
-        episodes = pd.DataFrame(self.episodes, columns=list(EPISODE_COLUMNS))
+        judged = [REQUIREMENT_COLUMN + name for name in self.requirements]
+        episodes = pd.DataFrame(self.episodes, columns=[*EPISODE_COLUMNS, *judged])
         episodes.to_parquet(self.directory / "episodes.parquet", index=False)
         failure_columns = [
             "episode",

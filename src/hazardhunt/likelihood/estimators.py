@@ -70,6 +70,10 @@ class EstimatorParams(BaseModel):
     failures alone (before, to the best ``elite_share`` of the last batch and better)."""
     adapt_share: float = Field(default=0.5, gt=0.0, lt=1.0)
     """``ce``: the largest share of the budget spent moving the proposal."""
+    penalty: float = Field(default=2.0, ge=0.0, le=100.0)
+    """``ce``: how much better than the model a dimension's fit must explain the elites to
+    be used, in multiples of the Bayesian information criterion's price of its parameters
+    (0: every dimension is fitted)."""
 
 
 @dataclass(frozen=True)
@@ -205,7 +209,7 @@ def next_proposal(
         elite = np.flatnonzero(np.concatenate(scores) >= level)
         weights = np.exp(np.concatenate(log_weights)[elite])
         fitted = schedule.proposal.fitted(
-            [values[i] for i in elite], weights, params.smoothing, params.defensive
+            [values[i] for i in elite], weights, params.smoothing, params.defensive, params.penalty
         )
         schedule = Schedule(fitted, level, still)
     return schedule

@@ -13,7 +13,8 @@ probability. The weight ``p(x) / q(x)`` is exact: both densities are normalised.
 
 The cross-entropy method (Rubinstein and Kroese 2004; Kochenderfer et al., "Algorithms for
 Validation", ch. 7) fits the tilts to the episodes whose score reached the current level,
-each weighted by its likelihood ratio, by weighted moments, smoothed with the previous tilt.
+each weighted by its likelihood ratio, by weighted moments, smoothed with the previous tilt;
+a dimension whose fit does not pay for itself (an information criterion) keeps the model.
 """
 
 from __future__ import annotations
@@ -29,6 +30,9 @@ from scipy import stats
 
 from hazardhunt.likelihood.distributions import Dimension
 
+MIN_ELITES = 4.0
+"""The effective number of elites a dimension's penalty assumes at least (one or two heavy
+elites would otherwise cost nothing to fit)."""
 EDGE = 1e-12
 """Quantiles are kept this far inside (0, 1)."""
 MIN_SHAPE = 0.2
@@ -41,7 +45,6 @@ SPREAD = 0.1
 """The share of a continuous dimension's tilt that stays uniform over its quantiles, so that
 no part of the model's range is left to the defensive mixture alone (a failure drawn far from
 where the tilt points would otherwise weigh up to ``1 / defensive``)."""
-"""The smallest share a discrete value keeps in a fitted tilt."""
 
 
 @dataclass(frozen=True)
@@ -119,27 +122,44 @@ class Proposal:
         weights: NDArray[np.float64],
         smoothing: float,
         defensive: float,
+        penalty: float = 0.0,
     ) -> Proposal:
         """The tilts fitted to the elite ``samples``, each weighted by its likelihood ratio,
-        smoothed: ``smoothing`` * fit + (1 - ``smoothing``) * the current tilt."""
+        smoothed: ``smoothing`` * fit + (1 - ``smoothing``) * the current tilt.
+
+        A dimension is tilted only where its fit explains the elites better than the model
+        does by more than ``penalty`` times the Bayesian information criterion's price of its
+        parameters (``k / 2 * log n``, ``n`` the elites' effective number, at least
+        :data:`MIN_ELITES`); otherwise the fit is the model itself. A variable that does not
+        matter would else follow the noise of a few heavy elites, and every such tilt
+        multiplies the weights' variance."""
         w = np.asarray(weights, dtype=np.float64)
         w = w / w.sum()
+        elites = 1.0 / float(np.sum(w**2))
+        price = penalty * 0.5 * math.log(max(elites, MIN_ELITES))
         shapes, probabilities = dict(self.shapes), dict(self.probabilities)
         for dim in self.dims:
             column = np.array([s[dim.name] for s in samples], dtype=np.float64)
             if dim.discrete:
                 index = np.searchsorted(dim.support, column)
+                model = dim.distribution.pmf(dim.support)
                 counts = np.bincount(index, weights=w, minlength=len(dim.support))
                 # A value the model never takes stays out of the proposal.
-                possible = dim.distribution.pmf(dim.support) > 0
+                possible = model > 0
                 counts = np.where(possible, np.maximum(counts, MIN_PROBABILITY), 0.0)
                 fit = counts / counts.sum()
+                gain = elites * float(w @ np.log(fit[index] / model[index]))
+                if gain <= price * (int(possible.sum()) - 1):
+                    fit = model / model.sum()
                 old = np.asarray(self.probabilities[dim.name])
                 new = smoothing * fit + (1.0 - smoothing) * old
                 probabilities[dim.name] = tuple(float(p) for p in new / new.sum())
             else:
                 u = np.clip(dim.distribution.cdf(column), EDGE, 1.0 - EDGE)
                 a, b = _beta_moments(float(w @ u), float(w @ (u - w @ u) ** 2))
+                tilt = SPREAD + (1.0 - SPREAD) * stats.beta.pdf(u, a, b)
+                if elites * float(w @ np.log(tilt)) <= price * 2:
+                    a, b = 1.0, 1.0
                 old_a, old_b = self.shapes[dim.name]
                 shapes[dim.name] = (
                     smoothing * a + (1.0 - smoothing) * old_a,

@@ -42,6 +42,16 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         overall, classes, points, counted = _splitting(config, table, classes_found, threshold)
     else:
         overall, classes, points, counted = _weighted(table, classes_found)
+    untested = None
+    if errors:
+        # An encounter the SUT could not play may have been a failure: the probability of a
+        # failure lies between the estimate's low end and the high end of this one.
+        errored = table["sut_error"].to_numpy(bool)
+        failed_or_errored = table["failure"].to_numpy(bool) | errored
+        untested = {
+            "probability": _event(config, table, errored, threshold).record(),
+            "failure_or_untested": _event(config, table, failed_or_errored, threshold).record(),
+        }
     return {
         "scenario": config.scenario,
         "field": config.field,
@@ -50,6 +60,7 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         "episodes_counted": counted,
         "sut_errors": errors,
         "probability": overall.record(),
+        "untested": untested,
         "classes": classes,
         "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
         "convergence": points,
@@ -80,6 +91,24 @@ def _weighted(
     except OverflowError as error:
         raise EstimateError(f"the estimate cannot be computed: {error}") from None
     return overall, classes, convergence(table), len(counted)
+
+
+def _event(
+    config: EstimateConfig, table: pd.DataFrame, event: np.ndarray, threshold: float
+) -> Estimate:
+    """The probability of the episodes ``event`` marks, by the estimate's own method."""
+    if config.estimator.method == "splitting":
+        planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+        return splitting_estimate(planner, table, event)[0]
+    counted = ~table["adapting"].to_numpy(bool)
+    try:
+        return estimate(
+            event[counted],
+            table["log_weight"].to_numpy(float)[counted],
+            table["defensive"].to_numpy(float)[counted],
+        )
+    except OverflowError as error:
+        raise EstimateError(f"the estimate cannot be computed: {error}") from None
 
 
 def _splitting(

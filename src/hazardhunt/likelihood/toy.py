@@ -6,6 +6,9 @@ fails when the score reaches ``threshold``: the sum is normal with variance 2, s
 probability of a failure is ``(1 - p_looks) * Q(threshold / sqrt(2)) + p_looks *
 Q((threshold + 2) / sqrt(2))`` with ``Q`` the standard normal tail. A search must find both the
 rare sum and, mostly, the rare inattention.
+
+``idle`` more variables that change nothing (normal and Bernoulli in turn) make the search
+harder as a simulator's many parameters do: an estimator must leave them as the model has them.
 """
 
 from __future__ import annotations
@@ -21,14 +24,16 @@ from hazardhunt.likelihood.encounters import Draw, Played
 class ClosedFormEncounters:
     """Encounters with a known probability of failure (:attr:`probability`)."""
 
-    def __init__(self, threshold: float = 4.0, p_looks: float = 0.9) -> None:
+    def __init__(self, threshold: float = 4.0, p_looks: float = 0.9, idle: int = 0) -> None:
         self.threshold = threshold
         self.p_looks = p_looks
         normal = {"distribution": "normal", "mean": 0.0, "sd": 1.0}
+        coin = {"distribution": "bernoulli", "p": 0.2}
         self.dimensions = (
             dimension("toy", "a", normal),
             dimension("toy", "b", normal),
             dimension("toy", "looks", {"distribution": "bernoulli", "p": p_looks}),
+            *(dimension("toy", f"idle{i}", coin if i % 2 else normal) for i in range(idle)),
         )
 
     @property

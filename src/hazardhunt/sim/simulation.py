@@ -21,7 +21,7 @@ import dataclasses
 import math
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,6 +32,7 @@ from hazardhunt.errors import InputError
 from hazardhunt.sim.effects import EffectsState, SutEffects
 from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySample
 from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
+from hazardhunt.spec.requirements import Requirement, Verdict, episode_signals, judged
 from hazardhunt.spec.risk import RiskParams, risk
 from hazardhunt.spec.safety import ContactVerdict, SafetySpecParams, judge_contact
 from hazardhunt.sut.guard import (
@@ -142,6 +143,8 @@ class EpisodeResult:
     """The risk at every physics step."""
     trajectory: tuple[TrajectorySample, ...] | None = None
     """The episode at every control instant and at its end, when it was kept."""
+    verdicts: Mapping[str, Verdict] = field(default_factory=dict)
+    """Each of the simulation's :attr:`Simulation.requirements`' verdict on the episode."""
 
     @property
     def outcome(self) -> str | None:
@@ -209,6 +212,9 @@ class Simulation:
         self._started = False
         self.effects: SutEffects | None = None
         """The SUT's uncertainties in the episodes that start from now on; None: nominal."""
+        self.requirements: tuple[Requirement, ...] = ()
+        """Requirements beyond the contact rule, each episode judged by them
+        (:attr:`EpisodeResult.verdicts`)."""
         self._effects: EffectsState | None = None
         self._braking = self.robot_params
         """The robot's parameters the physics brakes with (the effects may change them)."""
@@ -410,12 +416,23 @@ class Simulation:
         """The episode so far as a result (its trajectory when ``keep_trajectory`` says so)."""
         summary = self.summary()
         keep = keep_trajectory(summary) if callable(keep_trajectory) else keep_trajectory
+        trajectory = tuple(self.trajectory()) if keep or self.requirements else None
+        verdicts = {}
+        if self.requirements and trajectory:
+            response = self.field.response_time
+            if self._effects is not None:
+                response += self._effects.effects.response_time
+            signals = episode_signals(
+                trajectory, self._braking.emergency_deceleration, response, self._goal
+            )
+            verdicts = judged(self.requirements, signals)
         return EpisodeResult(
             summary=summary,
             timing=self.timing(),
             actions=self.actions,
             risks=np.asarray(self._risks, dtype=np.float64),
-            trajectory=tuple(self.trajectory()) if keep else None,
+            trajectory=trajectory if keep else None,
+            verdicts=verdicts,
         )
 
     def decode_action(self, action: Action) -> tuple[float, float]:

@@ -1,0 +1,163 @@
+"""Requirements beyond the contact rule: signal temporal logic over an episode's signals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hazardhunt.spec.requirements import (
+    LIBRARY,
+    SIGNALS,
+    RequirementError,
+    StlRequirement,
+    load_requirements,
+    requirements_of,
+)
+from tests.helpers import hazardhunt
+from tests.spec.test_failure_classes_recorded import RECORDED, recorded_simulation
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def trace(**signals):
+    """Signals sampled every 0.2 s; unnamed ones constant 0."""
+    count = len(next(iter(signals.values())))
+    values = {name: np.zeros(count) for name in SIGNALS}
+    values.update({name: np.asarray(v, dtype=float) for name, v in signals.items()})
+    return {"time": np.arange(count) * 0.2, **values}
+
+
+def test_the_library_reads_and_every_requirement_names_known_signals():
+    library = load_requirements(LIBRARY)
+    assert [r.name for r in library] == [
+        "separation",
+        "slow-near-people",
+        "no-restart-in-field",
+        "reach-goal",
+    ]
+    for requirement in library:
+        assert requirement.description
+        assert requirement.source
+        assert set(requirement.signals) <= set(SIGNALS)
+
+
+def test_robustness_is_the_margin_and_its_sign_the_verdict():
+    slow = requirements_of(["slow-near-people"])[0]
+    careful = slow.check(trace(clearance=[2.0, 0.4, 0.3], robot_speed=[1.0, 0.2, 0.1]))
+    hasty = slow.check(trace(clearance=[2.0, 0.4, 0.3], robot_speed=[1.0, 0.7, 0.1]))
+    assert careful.robustness == pytest.approx(0.1)
+    assert not careful.violated
+    assert hasty.robustness == pytest.approx(-0.1)  # 0.4 m from 0.5 m
+    assert hasty.violated
+
+
+def test_time_bounds_are_seconds():
+    arrives = trace(goal_distance=[5.0] * 20 + [0.1] * 30)  # at 4 s
+    soon = StlRequirement("soon", "eventually[0:3](goal_distance <= 0.3)")
+    late = StlRequirement("late", "eventually[0:5](goal_distance <= 0.3)")
+    assert soon.check(arrives).violated
+    assert not late.check(arrives).violated
+
+
+@pytest.mark.parametrize(
+    ("formula", "says"),
+    [
+        ("always(clearence >= 1)", "formula position 8: unknown signal 'clearence'"),
+        ("always((clearance < 0.5) implies robot_speed <= )", "formula position 49"),
+        ("always(clearance >", "formula position 19"),
+    ],
+)
+def test_a_formula_that_cannot_be_monitored_names_file_requirement_and_position(
+    tmp_path, formula, says
+):
+    path = tmp_path / "mine.toml"
+    path.write_text(f'[requirements.gap]\nformula = "{formula}"\n')
+    with pytest.raises(RequirementError) as raised:
+        load_requirements(path)
+    message = str(raised.value)
+    assert message.startswith(f"{path}: requirement 'gap': ")
+    assert says in message
+    assert "\n" not in message
+
+
+def test_a_requirements_file_with_unknown_keys_or_names_is_refused(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text('[requirements.gap]\nformula = "always(clearance >= 1)"\nlevel = 3\n')
+    with pytest.raises(RequirementError, match=r"requirements.gap: level: unknown key"):
+        load_requirements(path)
+    with pytest.raises(RequirementError, match="not in hazardhunt's library"):
+        requirements_of(["seperation"])
+    with pytest.raises(RequirementError, match="named twice"):
+        requirements_of(["separation", "separation"])
+
+
+def test_every_recorded_failure_violates_the_separation_and_replays_its_verdict():
+    separation = requirements_of(["separation", "slow-near-people"])
+    for name in ("edge-entry/moving", *sorted(RECORDED)[:2]):
+        example = RECORDED[name]
+        simulation = recorded_simulation(example)
+        simulation.requirements = separation
+        actions = np.asarray(example["actions"], dtype=np.float32)
+        first = simulation.simulate(actions, keep_trajectory=False)
+        assert first.outcome == "failure"
+        assert first.trajectory is None  # judged all the same
+        assert first.verdicts["separation"].violated  # a contact while the robot moves
+        again = simulation.simulate(actions, keep_trajectory=False)
+        assert again.verdicts == first.verdicts
+
+
+def test_a_run_records_each_episodes_robustness_and_counts_the_violations(tmp_path):
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--tester", "random",
+        "--episodes", 12, "--decision-period", 0.2, "--out", tmp_path / "run",
+        "--requirement", "separation", "--requirement", "reach-goal", "--json", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    episodes = pd.read_parquet(tmp_path / "run" / "episodes.parquet")
+    for name in ("separation", "reach-goal"):
+        robustness = episodes[f"requirement:{name}"]
+        assert len(robustness) == 12
+        assert robustness.notna().all()
+        counted = summary["requirements"][name]
+        assert counted["violations"] == int((robustness < 0).sum())
+        assert counted["min_robustness"] == pytest.approx(robustness.min())
+    shown = hazardhunt("report", tmp_path / "run", cwd=ROOT)
+    assert shown.returncode == 0, shown.stderr
+    page = (tmp_path / "run" / "report" / "index.html").read_text()
+    assert "Requirements beyond the contact rule" in page
+    table = pd.read_csv(tmp_path / "run" / "report" / "tables" / "requirements.csv")
+    assert list(table["requirement"]) == ["separation", "reach-goal"]
+    assert list(table["violations"]) == [
+        summary["requirements"][name]["violations"] for name in table["requirement"]
+    ]
+
+
+def test_a_bad_requirement_stops_the_run_before_anything_is_written(tmp_path):
+    mine = tmp_path / "mine.toml"
+    mine.write_text('[requirements.gap]\nformula = "always(gap >= 1)"\n')
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--episodes", 5,
+        "--out", tmp_path / "run", "--requirement", f"{mine}:gap", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert "mine.toml: requirement 'gap': formula position 8: unknown signal 'gap'" in done.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_campaign_file_finds_its_requirements_file_beside_it(tmp_path):
+    from hazardhunt.campaign.config import ConfigError, load_campaign
+
+    (tmp_path / "mine.toml").write_text('[requirements.gap]\nformula = "always(clearance >= 1)"\n')
+    campaign = tmp_path / "campaign.toml"
+    body = 'scenarios = ["crossing"]\nfields = ["2m"]\ntesters = ["random"]\nseeds = [0]\n'
+    campaign.write_text(body + 'episodes = 5\nrequirements = ["mine.toml", "separation"]\n')
+    runs = load_campaign(campaign).runs()
+    assert runs[0].requirements == [str(tmp_path / "mine.toml"), "separation"]
+    campaign.write_text(body + 'episodes = 5\nrequirements = ["theirs.toml"]\n')
+    with pytest.raises(ConfigError, match=r"campaign.toml: requirements: .*theirs.toml"):
+        load_campaign(campaign)
