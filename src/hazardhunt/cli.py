@@ -264,6 +264,13 @@ def run_command(
     classifier_param: ClassifierParamOption = None,
     sut_error_limit: SutErrorLimitOption = 1.0,
     requirement: RequirementOption = None,
+    search_on: Annotated[
+        str | None,
+        typer.Option(
+            help="Search on this requirement (one of --requirement's): the episode-level "
+            "testers hunt its violations, guided by its robustness, instead of unsafe contacts."
+        ),
+    ] = None,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
@@ -300,6 +307,7 @@ def run_command(
             classifier=_plugin("--classifier", classifier, classifier_param),
             sut_error_limit=sut_error_limit,
             requirements=requirement or [],
+            search_on=search_on,
         )
     )
     check_plugins(config)

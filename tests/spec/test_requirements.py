@@ -161,3 +161,39 @@ def test_a_campaign_file_finds_its_requirements_file_beside_it(tmp_path):
     campaign.write_text(body + 'episodes = 5\nrequirements = ["theirs.toml"]\n')
     with pytest.raises(ConfigError, match=r"campaign.toml: requirements: .*theirs.toml"):
         load_campaign(campaign)
+
+
+def test_a_search_on_a_requirement_closes_in_on_its_violations(tmp_path):
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--tester", "cem",
+        "--tester-param", "batch_size=20", "--episodes", 60, "--out", tmp_path / "run",
+        "--requirement", "slow-near-people", "--search-on", "slow-near-people", "--json",
+        cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    robustness = pd.read_parquet(tmp_path / "run" / "episodes.parquet")[
+        "requirement:slow-near-people"
+    ]
+    first, last = robustness[:20].median(), robustness[40:].median()
+    assert last < 0.5 * first  # each batch refitted to the episodes nearest a violation
+    assert json.loads(done.stdout)["requirements"]["slow-near-people"]["violations"] > 0
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        (["--search-on", "separation"], "is not one of the run's requirements"),
+        (
+            ["--tester", "ppo-max", "--requirement", "separation", "--search-on", "separation"],
+            "learns from its reward",
+        ),
+    ],
+)
+def test_searching_on_what_cannot_be_searched_is_refused(tmp_path, options, says):
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--episodes", 5,
+        "--out", tmp_path / "run", *options, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    assert says in done.stderr
+    assert not (tmp_path / "run").exists()

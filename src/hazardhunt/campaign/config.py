@@ -319,6 +319,10 @@ class RunConfig(_Strict):
     requirements: list[str] = []
     """Requirements beyond the contact rule every episode is judged by: names of hazardhunt's
     library, requirements files, or ``FILE.toml:NAME`` (``docs/requirements.md``)."""
+    search_on: str | None = None
+    """The name of one of ``requirements`` the episode-level testers search on (its
+    violations and robustness in place of unsafe contacts and risk); None: the contact
+    rule."""
 
     @field_validator("requirements")
     @classmethod
@@ -353,6 +357,8 @@ class RunConfig(_Strict):
     @model_validator(mode="after")
     def _runs_as_configured(self) -> RunConfig:
         _check_built_in_controller(self.env, self.controller)
+        if self.search_on is not None:
+            _check_search_on(self.search_on, self.requirements, self.tester, self.tester_params)
         if self.tester_plugin is None:
             if "method" not in self.tester_params:
                 try:
@@ -400,6 +406,8 @@ class CampaignConfig(_Strict):
     requirements: list[str] = []
     """Requirements beyond the contact rule every run judges its episodes by (see
     :attr:`RunConfig.requirements`); a file is found next to the campaign file."""
+    search_on: str | None = None
+    """The requirement the episode-level testers search on (:attr:`RunConfig.search_on`)."""
 
     @field_validator("requirements")
     @classmethod
@@ -496,12 +504,33 @@ class CampaignConfig(_Strict):
                 classifier=self.classifier,
                 sut_error_limit=self.sut_error_limit,
                 requirements=self.requirements,
+                search_on=self.search_on,
             )
             for scenario in self.scenarios
             for field in self.fields
             for tester in self.testers
             for seed in self.seeds
         ]
+
+
+def _check_search_on(
+    name: str, requirements: list[str], tester: str, params: dict[str, Any]
+) -> None:
+    """Raises a validation error at ``search_on`` unless it names one of the requirements and
+    the tester searches episode by episode (a learning tester follows its reward)."""
+    names = [requirement.name for requirement in requirements_of(requirements)]
+    if name not in names:
+        known = ", ".join(names) or "none: name one with requirements / --requirement"
+        raise invalid(("search_on",), f"is not one of the run's requirements ({known})", name)
+    method = params.get("method", tester)
+    registered = TESTERS.get(method) if isinstance(method, str) else None
+    if registered is not None and not isinstance(registered.factory, type):
+        raise invalid(
+            ("search_on",),
+            f"tester {tester!r} learns from its reward; search on a requirement with an "
+            "episode-level tester (portfolio, cem, qd)",
+            name,
+        )
 
 
 def _check_tester_params(

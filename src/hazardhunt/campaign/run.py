@@ -55,6 +55,7 @@ from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
+from hazardhunt.testers.objective import objective_of
 from hazardhunt.world.scenario import Scenario
 
 
@@ -216,11 +217,7 @@ def record_run(
         if store.sut_error_count >= config.sut_error_limit * config.episodes:
             raise NothingTested(config, store)  # the run can no longer pass
 
-    recorder = EpisodeRecorder(
-        AGVEnv.wrapping(simulation, reward_of(tester)),
-        on_episode,
-        simulation_factory=functools.partial(simulation_of, config),
-    )
+    recorder = _recorder(config, AGVEnv.wrapping(simulation, reward_of(tester)), on_episode)
     if progress is not None:
         progress(RunProgress(0, config.episodes, 0, 0.0))
     try:
@@ -235,6 +232,17 @@ def record_run(
     summary["checksums"] = file_checksums(directory)
     write_json_atomic(directory / "summary.json", summary)
     return summary
+
+
+def _recorder(
+    config: RunConfig, env: AGVEnv, on_episode: Callable[[EpisodeRecord], None]
+) -> EpisodeRecorder:
+    """What the run's tester plays through, its search after the run's objective."""
+    recorder = EpisodeRecorder(
+        env, on_episode, simulation_factory=functools.partial(simulation_of, config)
+    )
+    recorder.objective = objective_of(config.search_on)
+    return recorder
 
 
 def _check_played(config: RunConfig, store: RunStore) -> None:

@@ -18,6 +18,7 @@ from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.rewards import RewardKind
 from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES as MAX_WORKER_PROCESSES
 from hazardhunt.testers.evaluator import EpisodeEvaluator, Plan
+from hazardhunt.testers.objective import CONTACT, Objective
 from hazardhunt.testers.spaces import DECISION_KINDS, DecisionSpace
 
 
@@ -98,6 +99,8 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
         self.on_episode = on_episode
         self.keep_trajectory = keep_trajectory
         self.simulation_factory = simulation_factory
+        self.objective: Objective = CONTACT
+        """What an episode-level search looks for (the run's ``search_on``)."""
         self.episodes_done = 0
         self._evaluator: EpisodeEvaluator | None = None
 

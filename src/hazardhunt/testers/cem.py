@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 from pydantic import Field
 
 from hazardhunt.sim.simulation import EpisodeResult
-from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.novelty import FailureArchive
 from hazardhunt.testers.search import SearchContext, SearchTester, SpaceParams
@@ -78,6 +77,7 @@ class CrossEntropySampler:
             by default.
         """
         self.params = params
+        self.objective = context.objective
         self.rng = np.random.default_rng(context.seed)
         self.horizon = context.horizon
         self.searches = [
@@ -111,7 +111,7 @@ class CrossEntropySampler:
         assert self._samples is not None, "tell() before ask()"
         search, samples = self.search, self._samples[: len(results)]
         self.batches += 1
-        scores, novel = self._scores([result.summary for result in results])
+        scores, novel = self._scores(results)
         # The elites, best first, weighted by rank as CMA-ES weights its parents.
         weights = self.weights[: len(samples)] / self.weights[: len(samples)].sum()
         elite = samples[np.argsort(scores, kind="stable")[::-1][: len(weights)]]
@@ -128,12 +128,14 @@ class CrossEntropySampler:
             search.stale = 0
             self.restarts += 1
 
-    def _scores(self, summaries: list[EpisodeSummary]) -> tuple[NDArray[np.float64], bool]:
-        """Each episode's score, and whether the batch found a new failure mechanism."""
+    def _scores(self, results: list[EpisodeResult]) -> tuple[NDArray[np.float64], bool]:
+        """Each episode's score, and whether the batch found a new failure mechanism (or a
+        violation of the requirement searched on, in a new place)."""
         scores, novel, radius = [], False, self.params.novelty_radius
-        for summary in summaries:
-            if summary.outcome != "failure":
-                scores.append(summary.max_risk)
+        for result in results:
+            summary = result.summary
+            if not self.objective.hit(result):
+                scores.append(self.objective.score(result))
                 continue
             distance = self.archive.novelty(summary)
             novel = novel or distance >= radius

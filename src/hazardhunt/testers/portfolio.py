@@ -32,6 +32,9 @@ How the budget moves:
   search that finds its first failure late (behind a protective field) gets to find it; the
   mirror, which has something to propose only after a failure, is asked first when it has.
 
+Searching on a requirement (``hazardhunt run --search-on NAME``), a violation counts as a
+failure does here, the requirement's name standing for its class.
+
 The failures found count as known for every arm: the cross-entropy arms score a failure by its
 distance from all failures the portfolio has, so each arm is pushed away from what the others
 found. An arm that raises is dropped, with a warning in the run's record, and the others share
@@ -62,6 +65,7 @@ from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
 from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.novelty import FailureArchive
+from hazardhunt.testers.objective import ContactRule
 from hazardhunt.testers.qd import QualityDiversityParams, QualityDiversitySampler
 from hazardhunt.testers.search import (
     Sampler,
@@ -145,6 +149,7 @@ class MirrorSampler:
 
     def __init__(self, params: MirrorParams, context: SearchContext) -> None:
         self.params = params
+        self.objective = context.objective
         self.filled: set[tuple[int, int, int]] = set()
         self.attempts: dict[tuple[int, int, int], int] = {}
         self.queue: list[tuple[tuple[int, int, int], Plan]] = []
@@ -152,7 +157,7 @@ class MirrorSampler:
     def observe(self, plans: list[Plan], results: list[EpisodeResult], moving: float) -> None:
         """Hear what any arm played (the mirror's own episodes included)."""
         for plan, result in zip(plans, results, strict=False):
-            if result.summary.outcome != "failure":
+            if not self.objective.hit(result):
                 continue
             cell = failure_cell(result.summary, moving)
             self.filled.add(cell)
@@ -303,6 +308,7 @@ class PortfolioSampler:
             _ArmState(arm, _sampler(arm, _arm_context(context, arm), known), first_look=_looks(arm))
             for arm in params.arms
         ]
+        self.objective = context.objective
         self.classifier = MechanismClassifier(robot=context.simulation.robot_params)
         self.field = context.simulation.field
         self.classes_found: set[str] = set()
@@ -375,11 +381,15 @@ class PortfolioSampler:
     def _gain(self, state: _ArmState, result: EpisodeResult, episode: int) -> float:
         """What ``episode``, played by ``state``'s arm, found that no arm had."""
         summary = result.summary
-        if summary.outcome != "failure":
+        if not self.objective.hit(result):
             return 0.0
         state.failures += 1
         gain = FAILURE_GAIN
-        failure_class = self.classifier.classify(result.trajectory or (), summary, self.field)
+        failure_class = (
+            self.classifier.classify(result.trajectory or (), summary, self.field)
+            if isinstance(self.objective, ContactRule)
+            else self.objective.name  # a violation: the requirement's name is its class
+        )
         if failure_class not in self.classes_found:
             self.classes_found.add(failure_class)
             state.classes[failure_class] = episode
@@ -426,7 +436,7 @@ def _arm_context(context: SearchContext, arm: Arm) -> SearchContext:
     (so that adding an arm leaves the others' episodes as they were)."""
     entropy = [context.seed, zlib.crc32(arm.name.encode())]
     seed = int(np.random.SeedSequence(entropy).generate_state(1)[0])
-    return SearchContext(context.simulation, seed)
+    return SearchContext(context.simulation, seed, context.objective)
 
 
 def own_tester(arm: Arm, seed: int) -> SearchTester:

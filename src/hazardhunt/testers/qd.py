@@ -98,6 +98,7 @@ class QualityDiversitySampler:
 
     def __init__(self, params: QualityDiversityParams, context: SearchContext) -> None:
         self.params = params
+        self.objective = context.objective
         self.seed = context.seed
         self.horizon = context.horizon
         self.spaces = params.space.decision_spaces
@@ -130,7 +131,7 @@ class QualityDiversitySampler:
     def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
         assert self._asked is not None, "tell() before ask()"
         names = self.params.measures
-        objective = [result.summary.max_risk for result in results]
+        objective = [self.objective.score(result) for result in results]
         measures = [measures_of(result.summary, names) for result in results]
         solutions = self._asked[: len(results)]
         if self._attacking or len(results) < len(self._asked):

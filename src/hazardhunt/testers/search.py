@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.testers.base import EpisodeRecorder, TesterParameterError
 from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES, EpisodeEvaluator, Plan
+from hazardhunt.testers.objective import CONTACT, Objective
 from hazardhunt.testers.spaces import SearchSpace
 
 
@@ -147,6 +148,8 @@ class SearchContext:
     """The run's simulation: horizon, robot and human parameters, field (not for playing)."""
     seed: int
     """The run's seed."""
+    objective: Objective = CONTACT
+    """What the search looks for: unsafe contacts, or a requirement's violations."""
 
     @property
     def horizon(self) -> int:
@@ -182,7 +185,7 @@ class SearchTester:
         raise NotImplementedError
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
-        context = SearchContext(env.simulation, self.seed)
+        context = SearchContext(env.simulation, self.seed, env.objective)
         sampler = self.sampler = self.make_sampler(context)
         with EpisodeEvaluator(env, self.params.workers) as evaluator:
             while env.episodes_done < episodes:
