@@ -9,6 +9,7 @@ measured (``(1 - p) / (p * spread^2)``).
     python benchmarks/estimate_coverage.py --repetitions 200 \\
         --out benchmarks/results/estimate_coverage.json
     python benchmarks/estimate_coverage.py --repetitions 200 --methods splitting
+    python benchmarks/estimate_coverage.py --repetitions 200 --idle-only --penalty 0
 """
 
 from __future__ import annotations
@@ -42,7 +43,14 @@ CASES = (
 
 
 def repeat(
-    threshold: float, p_looks: float, idle: int, method: str, episodes: int, size: int, reps: int
+    threshold: float,
+    p_looks: float,
+    idle: int,
+    method: str,
+    episodes: int,
+    size: int,
+    reps: int,
+    penalty: float = 2.0,
 ):
     toy = ClosedFormEncounters(threshold=threshold, p_looks=p_looks, idle=idle)
     truth = toy.probability
@@ -51,7 +59,11 @@ def repeat(
         config = EstimateConfig(
             episodes=episodes,
             seed=seed,
-            estimator=EstimatorParams(method=method, batch_size=size),  # type: ignore[arg-type]
+            estimator=EstimatorParams(
+                method=method,  # type: ignore[arg-type]
+                batch_size=size,
+                penalty=penalty,
+            ),
         )
         with tempfile.TemporaryDirectory() as directory:
             table = EstimateRun(config, Path(directory), source=toy).run()
@@ -67,6 +79,7 @@ def repeat(
         "threshold": threshold,
         "p_looks": p_looks,
         "idle": idle,
+        "penalty": penalty if method == "ce" else None,
         "budget": episodes,
         "repetitions": reps,
         "coverage": covered / reps,
@@ -83,13 +96,19 @@ def main() -> None:
     parser.add_argument("--repetitions", type=int, default=100)
     parser.add_argument("--out", type=Path)
     parser.add_argument("--methods", nargs="*", default=None, help="Only these estimators.")
+    parser.add_argument(
+        "--penalty", type=float, default=2.0, help="ce: the estimator's penalty (0: no selection)."
+    )
+    parser.add_argument("--idle-only", action="store_true", help="Only the cases with idle ones.")
     args = parser.parse_args()
     started = time.perf_counter()
     rows = []
     for name, threshold, p_looks, idle, method, episodes, size in CASES:
-        if args.methods and method not in args.methods:
+        if (args.methods and method not in args.methods) or (args.idle_only and not idle):
             continue
-        played = repeat(threshold, p_looks, idle, method, episodes, size, args.repetitions)
+        played = repeat(
+            threshold, p_looks, idle, method, episodes, size, args.repetitions, args.penalty
+        )
         row = {"case": name, **played}
         rows.append(row)
         print(

@@ -6,6 +6,9 @@ and the violations found.
     python benchmarks/requirement_search.py --tester cem --episodes 200 --seeds 0 1 2 \\
         --requirements slow-near-people no-restart-in-field \\
         --out benchmarks/results/requirement_search_cem.json
+    python benchmarks/requirement_search.py --tester cem --episodes 200 --seeds 0 1 2 \
+        --requirements benchmarks/requirements_hard.toml:near-while-moving \
+        --out benchmarks/results/requirement_search_cem_hard.json
 """
 
 from __future__ import annotations
@@ -27,7 +30,9 @@ from hazardhunt.campaign.run import record_run
 def played(
     scenario: str, field: str, tester: str, requirement: str, seed: int, episodes: int, on: bool
 ) -> dict[str, Any]:
-    """One run judged by ``requirement``, searching on it when ``on``."""
+    """One run judged by ``requirement`` (a library name or ``FILE.toml:NAME``), searching on
+    it when ``on``."""
+    name = requirement.rpartition(":")[2]
     config = RunConfig(
         scenario=scenario,
         field=field,
@@ -36,12 +41,12 @@ def played(
         episodes=episodes,
         env=EnvOptions(),
         requirements=[requirement],
-        search_on=requirement if on else None,
+        search_on=name if on else None,
     )
     with tempfile.TemporaryDirectory() as directory:
         started = time.perf_counter()
         summary = record_run(config, Path(directory) / "run")
-    counted = summary["requirements"][requirement]
+    counted = summary["requirements"][name]
     return {
         "first_violation_episode": counted["first_violation_episode"],
         "violations": counted["violations"],
