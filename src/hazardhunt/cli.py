@@ -882,6 +882,11 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             + ("" if violated_first is None else f", the first episode {violated_first}")
             + f"; lowest robustness {count['min_robustness']:.3g}"
         )
+        decided = count.get("decided_by") or {}
+        if decided:
+            said += "; decided by " + ", ".join(
+                f"{shown(signals)} ({n:,})" for signals, n in decided.items()
+            )
         console.print(said, highlight=False)
     if faulty is not None:
         console.print(

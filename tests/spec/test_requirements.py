@@ -53,6 +53,23 @@ def test_robustness_is_the_margin_and_its_sign_the_verdict():
     assert not careful.violated
     assert hasty.robustness == pytest.approx(-0.1)  # 0.4 m from 0.5 m
     assert hasty.violated
+    # What explains it: both signals of the implication, from the second sample on.
+    assert hasty.signals == ("clearance", "robot_speed")
+    assert hasty.time == pytest.approx(0.2)
+    assert careful.signals == ()
+    assert careful.time is None
+
+
+def test_a_violation_names_the_signal_that_decided_it():
+    late = requirements_of(["reach-goal"])[0].check(trace(goal_distance=[5.0] * 150))
+    assert late.signals == ("goal_distance",)
+    close = requirements_of(["separation"])[0]
+    verdict = close.check(
+        trace(clearance=[3.0, 2.0, 0.4, 1.0], protective_separation=[1.0, 1.0, 0.6, 0.2])
+    )
+    assert verdict.robustness == pytest.approx(-0.2)
+    assert verdict.signals == ("clearance", "protective_separation")
+    assert verdict.time == pytest.approx(0.4)
 
 
 def test_time_bounds_are_seconds():
@@ -126,6 +143,7 @@ def test_a_run_records_each_episodes_robustness_and_counts_the_violations(tmp_pa
         counted = summary["requirements"][name]
         assert counted["violations"] == int((robustness < 0).sum())
         assert counted["min_robustness"] == pytest.approx(robustness.min())
+        assert sum(counted["decided_by"].values()) == counted["violations"]
     shown = hazardhunt("report", tmp_path / "run", cwd=ROOT)
     assert shown.returncode == 0, shown.stderr
     page = (tmp_path / "run" / "report" / "index.html").read_text()
@@ -135,6 +153,9 @@ def test_a_run_records_each_episodes_robustness_and_counts_the_violations(tmp_pa
     assert list(table["violations"]) == [
         summary["requirements"][name]["violations"] for name in table["requirement"]
     ]
+    separation = table.set_index("requirement").loc["separation"]
+    assert separation["violations"] > 0  # seed 0 walks into the robot's separation
+    assert "clearance" in separation["decided_by"]
 
 
 def test_a_bad_requirement_stops_the_run_before_anything_is_written(tmp_path):

@@ -566,7 +566,26 @@ def _requirements(report: _Report, results: Results) -> None:
         violations=lambda r: int((r < 0).sum()),
         lowest_robustness="min",
     ).reset_index()
+    table["decided_by"] = [_decided_by(results.runs, row) for row in table.itertuples()]
     report.table(section, "requirements", table)
+
+
+def _decided_by(runs: pd.DataFrame, row: Any) -> str:
+    """The signals that decided a requirement's violations in the runs of ``row``'s case and
+    tester, with their counts (from the runs' summaries)."""
+    counts: dict[str, int] = {}
+    mine = runs[
+        (runs["scenario"] == row.scenario)
+        & (runs["field"] == row.field)
+        & (runs["tester"] == row.tester)
+    ]
+    for requirements in mine.get("requirements", pd.Series(dtype=object)):
+        if not isinstance(requirements, dict):
+            continue
+        decided = (requirements.get(row.requirement) or {}).get("decided_by") or {}
+        for signals, count in decided.items():
+            counts[signals] = counts.get(signals, 0) + int(count)
+    return "; ".join(f"{signals}: {count}" for signals, count in counts.items())
 
 
 def _runs(report: _Report, results: Results) -> None:

@@ -21,6 +21,8 @@ class RequirementCount(TypedDict):
     first_violation_episode: int | None
     min_robustness: float
     """The lowest robustness of any episode (negative: the worst violation's depth)."""
+    decided_by: dict[str, int]
+    """Violations by the signals that explain them (``clearance+robot_speed``: count)."""
 
 
 class RunSummary(TypedDict, total=False):

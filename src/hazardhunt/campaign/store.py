@@ -47,6 +47,7 @@ from hazardhunt.spec.episode import (
     TrajectorySample,
 )
 from hazardhunt.spec.failure_classes import OTHER, FailureClassifier
+from hazardhunt.spec.requirements import Verdict
 from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.sut.guard import is_plugin_fault
 from hazardhunt.sut.safety_layer import FieldShape
@@ -268,7 +269,7 @@ class RunStore:
         row["loitering"] = self.loitering_rule.matches(summary)
         for name, verdict in result.verdicts.items():
             row[REQUIREMENT_COLUMN + name] = verdict.robustness
-            self._count(name, episode, verdict.robustness)
+            self._count(name, episode, verdict)
         self.episodes.append(row)
         if summary.outcome == "sut_error":
             self.sut_error_count += 1
@@ -333,19 +334,30 @@ class RunStore:
         found = {row["class"] for row in self.failures}
         return [name for name in self.classifier.classes_for(self.field) if name in found]
 
-    def _count(self, name: str, episode: int, robustness: float) -> None:
+    def _count(self, name: str, episode: int, verdict: Verdict) -> None:
         count = self.requirements.setdefault(
-            name, {"violations": 0, "first_violation_episode": None, "min_robustness": robustness}
+            name,
+            {
+                "violations": 0,
+                "first_violation_episode": None,
+                "min_robustness": verdict.robustness,
+                "decided_by": {},
+            },
         )
-        count["min_robustness"] = min(count["min_robustness"], robustness)
-        if robustness < 0.0:
+        count["min_robustness"] = min(count["min_robustness"], verdict.robustness)
+        if verdict.violated:
             count["violations"] += 1
             if count["first_violation_episode"] is None:
                 count["first_violation_episode"] = episode
+            signals = "+".join(verdict.signals) or "unexplained"
+            count["decided_by"][signals] = count["decided_by"].get(signals, 0) + 1
 
     def requirement_summary(self) -> dict[str, RequirementCount]:
         """Each requirement's violations, first violating episode and lowest robustness."""
-        return {name: RequirementCount(**count) for name, count in self.requirements.items()}
+        return {
+            name: RequirementCount(**{**count, "decided_by": dict(count["decided_by"])})
+            for name, count in self.requirements.items()
+        }
 
     def close(self) -> None:
         """Write the tables."""

@@ -75,6 +75,11 @@ class Verdict:
 
     robustness: float
     """The signed margin: positive, satisfied by that much; negative, violated by that much."""
+    signals: tuple[str, ...] = ()
+    """For a violation, the signals that explain it (rtamt's explanation of the formula:
+    those that hold the violating values); empty otherwise."""
+    time: float | None = None
+    """For a violation, the first instant of the episode the explanation points at, in s."""
 
     @property
     def violated(self) -> bool:
@@ -139,7 +144,23 @@ class StlRequirement:
         for name in self.signals:
             data[name] = [float(v) for v in signals[name]]
         trace = self._spec.evaluate(data)
-        return Verdict(float(trace[0][1]))
+        robustness = float(trace[0][1])
+        if robustness >= 0.0:
+            return Verdict(robustness)
+        return Verdict(robustness, *self._explained())
+
+    def _explained(self) -> tuple[tuple[str, ...], float | None]:
+        """The signals that explain the violation just evaluated, and its first instant."""
+        explainer = self._spec.explainer
+        explainer.explanations = {}  # it keeps what it explained before
+        try:
+            self._spec.explain()
+        except Exception:  # an operator rtamt cannot explain: the verdict stands without it
+            return (), None
+        found = {name: explainer.explanations.get(name) or [] for name in self.signals}
+        signals = tuple(name for name, intervals in found.items() if intervals)
+        starts = [interval[0] for name in signals for interval in found[name]]
+        return signals, (min(starts) * self.sampling_period if starts else None)
 
     def __repr__(self) -> str:
         return f"StlRequirement({self.name!r}, {self.formula!r})"
@@ -167,9 +188,11 @@ def _parsed(formula: str, signals: Sequence[str], period: float, place: str) -> 
     """rtamt's monitor of ``formula``."""
     with warnings.catch_warnings():  # its parser's imports use typing.io
         warnings.simplefilter("ignore", DeprecationWarning)
-        import rtamt
+        from rtamt.spec.stl.discrete_time.specification import (
+            StlDiscreteTimeOfflineSpecification,
+        )
 
-    spec = rtamt.StlDiscreteTimeSpecification()
+    spec = StlDiscreteTimeOfflineSpecification()  # offline: it explains its violations
     for name in signals:
         spec.declare_var(name, "float")
     spec.set_sampling_period(period, "s", 0.1)

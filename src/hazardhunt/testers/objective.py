@@ -77,3 +77,11 @@ def objective_of(search_on: str | None) -> Objective:
     """The objective of a run that searches on the requirement ``search_on`` (None: the
     contact rule)."""
     return CONTACT if search_on is None else RequirementRule(search_on)
+
+
+def violation_class(name: str, result: EpisodeResult) -> str:
+    """The class of a violation of the requirement ``name``: the requirement and the signals
+    that explain it (``slow-near-people/clearance+robot_speed``)."""
+    verdict = result.verdicts.get(name)
+    signals = "+".join(verdict.signals) if verdict is not None else ""
+    return f"{name}/{signals or 'unexplained'}"

@@ -33,7 +33,8 @@ How the budget moves:
   mirror, which has something to propose only after a failure, is asked first when it has.
 
 Searching on a requirement (``hazardhunt run --search-on NAME``), a violation counts as a
-failure does here, the requirement's name standing for its class.
+failure does here, its class the requirement's name and the signals that explain it
+(``slow-near-people/clearance+robot_speed``).
 
 The failures found count as known for every arm: the cross-entropy arms score a failure by its
 distance from all failures the portfolio has, so each arm is pushed away from what the others
@@ -65,7 +66,7 @@ from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
 from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.novelty import FailureArchive
-from hazardhunt.testers.objective import ContactRule
+from hazardhunt.testers.objective import ContactRule, violation_class
 from hazardhunt.testers.qd import QualityDiversityParams, QualityDiversitySampler
 from hazardhunt.testers.search import (
     Sampler,
@@ -388,7 +389,7 @@ class PortfolioSampler:
         failure_class = (
             self.classifier.classify(result.trajectory or (), summary, self.field)
             if isinstance(self.objective, ContactRule)
-            else self.objective.name  # a violation: the requirement's name is its class
+            else violation_class(self.objective.name, result)
         )
         if failure_class not in self.classes_found:
             self.classes_found.add(failure_class)
