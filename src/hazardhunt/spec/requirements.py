@@ -276,9 +276,9 @@ def requirements_of(
     library = {r.name: r for r in load_requirements(LIBRARY, sampling_period)}
     chosen: list[StlRequirement] = []
     for given in names:
-        if ".toml:" in given or given.endswith(".toml"):
-            path_text, _, one = given.rpartition(".toml:") if ".toml:" in given else (given, "", "")
-            path = Path(path_text if path_text.endswith(".toml") else path_text + ".toml")
+        file, _, one = given.rpartition(":") if ".toml:" in given else (given, "", "")
+        if file.endswith(".toml"):
+            path = Path(file)
             read = load_requirements(path, sampling_period)
             if one:
                 read = tuple(r for r in read if r.name == one)
