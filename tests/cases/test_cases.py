@@ -333,3 +333,48 @@ def test_text_from_a_case_file_reaches_the_terminal_as_text(cases, tmp_path):
     done = hazardhunt("regress", tmp_path / "forged.toml", "--trust-plugins", cwd=EXAMPLE)
     assert "\x1b" not in done.stdout + done.stderr
     assert "side\\x1b[2J[red]forged[/red]" in done.stdout
+
+
+def test_a_requirements_violations_export_as_cases_that_regress_checks_against_it(tmp_path):
+    mine = tmp_path / "mine.toml"
+    mine.write_text('[requirements.wide-berth]\nformula = "always(clearance >= 1.5)"\n')
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--tester", "random",
+        "--episodes", 12, "--decision-period", 0.2, "--out", tmp_path / "run",
+        "--requirement", "separation", "--requirement", mine, "--json",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    counted = json.loads(done.stdout)["requirements"]
+    assert counted["wide-berth"]["violations"] > 0
+    assert counted["separation"]["violations"] > 0
+    violations = pd.read_parquet(tmp_path / "run" / "violations.parquet")
+    for name, count in counted.items():
+        assert (violations["requirement"] == name).sum() == count["violations"]
+    exported = hazardhunt("export", tmp_path / "run", "--out", tmp_path / "cases")
+    assert exported.returncode == 0, exported.stderr
+    # One case per requirement and the signals that decided its violations, beside the
+    # failures' cases, each with its formula inlined.
+    read = {f: tomllib.loads(f.read_text()) for f in (tmp_path / "cases").glob("*.toml")}
+    judged = {f: case for f, case in read.items() if "requirement" in case}
+    expected = {f"{name}/{signals}" for name, c in counted.items() for signals in c["decided_by"]}
+    assert {case["expected"]["class"] for case in judged.values()} == expected
+    berth = next(case for case in judged.values() if case["requirement"]["name"] == "wide-berth")
+    assert berth["requirement"]["formula"] == "always(clearance >= 1.5)"
+    regressed = hazardhunt("regress", tmp_path / "cases", "--json")
+    code, result = regressed.returncode, json.loads(regressed.stdout)
+    assert code == 1  # some case still fails
+    by_case = {case["case"]: case for case in result["cases"]}
+    for path in judged:
+        assert by_case[path.name]["verdict"] == "still fails"
+        assert by_case[path.name]["failure_class"] == read[path]["expected"]["class"]
+    # A case whose requirement asks less is fixed; one whose formula does not parse is an error
+    # naming the file.
+    path = next(p for p, case in judged.items() if case["requirement"]["name"] == "wide-berth")
+    lax = read[path] | {"requirement": {"name": "wide-berth", "formula": "always(clearance >= -9)"}}
+    path.write_text(tomli_w.dumps(lax))
+    assert regress_case(path).verdict == "fixed"
+    path.write_text(
+        tomli_w.dumps(lax | {"requirement": {"name": "x", "formula": "always(gap > 1)"}})
+    )
+    with pytest.raises(CaseError, match=rf"{path.name} \[requirement\]: requirement 'x'.*gap"):
+        regress_case(path)

@@ -47,6 +47,9 @@ class Results:
     """One row per failure (``failures.parquet``), with the run's keys."""
     loitering: pd.DataFrame
     """One row per episode flagged as loitering (``loitering.parquet``), with the run's keys."""
+    violations: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=list(RUN_KEYS)))
+    """One row per requirement an episode violated (``violations.parquet``), with the run's
+    keys; empty for runs without requirements beyond the contact rule."""
     unfinished: list[str] = field(default_factory=list)
     """Run ids of the campaign that have not finished (they are left out of every table)."""
     damaged: dict[str, str] = field(default_factory=dict)
@@ -123,7 +126,7 @@ def load_results_of(
     runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
     tables = {
         name: _stacked(run_directories, summaries, f"{name}.parquet")
-        for name in ("episodes", "failures", "loitering")
+        for name in ("episodes", "failures", "loitering", "violations")
     }
     if classifier is None:
         plugins = [

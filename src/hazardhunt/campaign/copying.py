@@ -16,11 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from hazardhunt.campaign.config import CampaignConfig, ConfigError
+from hazardhunt.campaign.records import campaign_totals
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
     LEAVABLE,
     LEFT_OUT_KEY,
-    campaign_totals,
     copy_run,
     find_damage,
     write_json_atomic,

@@ -12,10 +12,10 @@ from pathlib import Path
 from typing import cast
 
 from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_difference
-from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary
+from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary, campaign_totals
 from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.store import campaign_totals, find_damage, write_json_atomic
+from hazardhunt.campaign.store import find_damage, write_json_atomic
 
 
 @dataclass(frozen=True)

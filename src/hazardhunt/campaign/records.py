@@ -95,3 +95,18 @@ class CampaignSummary(CampaignTotals):
     """The campaign's configuration."""
     updated_at: str
     runs: list[LedgerEntry]
+
+
+def campaign_totals(entries: list[LedgerEntry]) -> CampaignTotals:
+    """A campaign summary's counts from its run entries: the runs by status, and the episodes,
+    failures and SUT errors of the complete ones."""
+    complete = [e for e in entries if e["status"] == "complete"]
+    return {
+        "runs_total": len(entries),
+        "runs_complete": len(complete),
+        "runs_failed": sum(e["status"] == "failed" for e in entries),
+        "runs_pending": sum(e["status"] == "pending" for e in entries),
+        "episodes": sum(e.get("episodes", 0) for e in complete),
+        "failures": sum(e.get("failures", 0) for e in complete),
+        "sut_errors": sum(e.get("sut_errors", 0) for e in complete),
+    }

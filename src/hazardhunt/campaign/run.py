@@ -205,7 +205,8 @@ def record_run(
         "seed": config.seed,
         "decision_period": config.env.decision_period,
     }
-    store = RunStore(directory, replay_keys, classifier, simulation.field)
+    field, requirements = simulation.field, simulation.requirements
+    store = RunStore(directory, replay_keys, classifier, field, requirements=requirements)
     clock = time.perf_counter()
 
     def on_episode(record: EpisodeRecord) -> None:

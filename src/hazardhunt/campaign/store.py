@@ -7,6 +7,8 @@ Layout of a run directory::
     failures.parquet     one row per failure: what replays it (scenario, field, seed, actions)
                          and its class (SPEC 6)
     loitering.parquet    one row per episode flagged as loitering (reward hacking), with its actions
+    violations.parquet   with requirements beyond the contact rule: one row per requirement an
+                         episode violated, with what replays it and the requirement's formula
     trajectories/        part-*.parquet: every failure's trajectory at 0.2 s, keyed by episode
     tester/              what the tester learned (the PPO model)
     summary.json         written last: its presence marks the run finished; it holds the
@@ -34,9 +36,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from hazardhunt.campaign.records import (
-    CampaignTotals,
     FirstError,
-    LedgerEntry,
     RequirementCount,
 )
 from hazardhunt.spec.episode import (
@@ -47,7 +47,7 @@ from hazardhunt.spec.episode import (
     TrajectorySample,
 )
 from hazardhunt.spec.failure_classes import OTHER, FailureClassifier
-from hazardhunt.spec.requirements import Verdict
+from hazardhunt.spec.requirements import Requirement, Verdict
 from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.sut.guard import is_plugin_fault
 from hazardhunt.sut.safety_layer import FieldShape
@@ -66,6 +66,20 @@ FAILURE_SUMMARY_COLUMNS = ("outcome", "sim_time", "decision_steps", "contact_fac
 
 LOITERING_COLUMNS = ("outcome", "sim_time", "decision_steps", "emergency_stops", "time_in_field")
 """Columns of ``loitering.parquet`` taken from the episode summary (besides the replay keys)."""
+
+VIOLATION_COLUMNS = (
+    "requirement",
+    "formula",
+    "robustness",
+    "signals",
+    "time",
+    "outcome",
+    "sim_time",
+)
+"""Columns of ``violations.parquet`` besides the episode, the replay keys and the actions: the
+requirement, its formula (empty for a requirement that is not a formula), the robustness, the
+signals that decided the violation (``clearance+robot_speed``), its first instant, in s, and
+the episode's outcome and length."""
 
 LEFT_OUT_KEY = "left_out"
 """The key of a run's ``summary.json`` that lists the folders a copy left out."""
@@ -229,6 +243,7 @@ class RunStore:
         classifier: FailureClassifier,
         field: FieldShape,
         loitering: LoiteringRule = LoiteringRule(),
+        requirements: Sequence[Requirement] = (),
     ) -> None:
         """Args:
         directory: The run directory (exists).
@@ -237,7 +252,11 @@ class RunStore:
         classifier: Names each failure's class.
         field: The protective field, for the classifier.
         loitering: Flags episodes whose actions are kept to show reward hacking.
+        requirements: The run's requirements beyond the contact rule: their violations are
+            kept with what replays them (``violations.parquet``).
         """
+        self.formulas = {r.name: str(getattr(r, "formula", "")) for r in requirements}
+        self.violations: list[dict[str, Any]] = []
         self.directory = directory
         self.replay_keys = replay_keys
         self.classifier = classifier
@@ -270,6 +289,21 @@ class RunStore:
         for name, verdict in result.verdicts.items():
             row[REQUIREMENT_COLUMN + name] = verdict.robustness
             self._count(name, episode, verdict)
+            if verdict.violated:
+                self.violations.append(
+                    {
+                        "episode": episode,
+                        **self.replay_keys,
+                        "requirement": name,
+                        "formula": self.formulas.get(name, ""),
+                        "robustness": verdict.robustness,
+                        "signals": "+".join(verdict.signals),
+                        "time": verdict.time,
+                        "outcome": summary.outcome,
+                        "sim_time": summary.sim_time,
+                        "actions": result.actions.tolist(),
+                    }
+                )
         self.episodes.append(row)
         if summary.outcome == "sut_error":
             self.sut_error_count += 1
@@ -381,6 +415,12 @@ class RunStore:
             columns=["episode", *self.replay_keys, *LOITERING_COLUMNS, "actions"],
         )
         loitering.to_parquet(self.directory / "loitering.parquet", index=False)
+        if self.formulas:
+            violations = pd.DataFrame(
+                self.violations,
+                columns=["episode", *self.replay_keys, *VIOLATION_COLUMNS, "actions"],
+            )
+            violations.to_parquet(self.directory / "violations.parquet", index=False)
 
     def _flush_trajectories(self) -> None:
         if not self._trajectory_rows:
@@ -404,21 +444,6 @@ def left_out(directory: Path) -> list[str]:
     """The folders the copy of a finished run left out (empty for a run as it was recorded)."""
     summary = json.loads((directory / "summary.json").read_bytes())
     return [str(name) for name in summary.get(LEFT_OUT_KEY, [])]
-
-
-def campaign_totals(entries: list[LedgerEntry]) -> CampaignTotals:
-    """A campaign summary's counts from its run entries: the runs by status, and the episodes,
-    failures and SUT errors of the complete ones."""
-    complete = [e for e in entries if e["status"] == "complete"]
-    return {
-        "runs_total": len(entries),
-        "runs_complete": len(complete),
-        "runs_failed": sum(e["status"] == "failed" for e in entries),
-        "runs_pending": sum(e["status"] == "pending" for e in entries),
-        "episodes": sum(e.get("episodes", 0) for e in complete),
-        "failures": sum(e.get("failures", 0) for e in complete),
-        "sut_errors": sum(e.get("sut_errors", 0) for e in complete),
-    }
 
 
 def copy_run(source: Path, destination: Path, leave_out: tuple[str, ...] = ()) -> None:

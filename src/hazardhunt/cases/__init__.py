@@ -4,14 +4,13 @@ This package sits above ``analysis`` (export reads a run's tables through it) an
 (re-running a case builds its simulation as a run does); nothing below imports it.
 """
 
+from hazardhunt.cases.export import export_cases, write_pytest_module
 from hazardhunt.cases.regression import (
     VERDICTS,
     CaseError,
     RegressionResult,
     case_files,
-    export_cases,
     regress_case,
-    write_pytest_module,
 )
 
 __all__ = [

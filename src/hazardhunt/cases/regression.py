@@ -13,6 +13,12 @@ compares:
   case tested nothing: it is neither fixed nor failing, and ``regress`` exits with its own code;
 - ``fixed``: none of these.
 
+A run's violations of requirements beyond the contact rule (``violations.parquet``) are cases
+too: the case holds the requirement's name and formula, the expected class is the requirement
+and the signals that decided the violation, and re-running judges the episode by the formula
+(``still fails`` while violated for the same signals, ``changed`` for others, ``fixed`` once
+kept).
+
 A case file is data: nothing it names is imported from it. A failure classifier plug-in that a
 case names must be named again (``regress --classifier``); a controller or safety-layer plug-in
 must be named again (``--controller``, ``--safety-layer``) or the case's plug-ins trusted
@@ -28,25 +34,22 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import pandas as pd
-import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
 
-import hazardhunt
-from hazardhunt.analysis.results import load_results
-from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import EnvOptions, file_name
+from hazardhunt.campaign.config import EnvOptions
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
-from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.run import build_simulation
 from hazardhunt.campaign.store import sut_error_of
 from hazardhunt.errors import InputError
+from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.spec.failure_classes import FailureClassifier
+from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.sut.plugins import PluginError
+from hazardhunt.testers.objective import violation_class
 from hazardhunt.textfiles import loads_toml
 from hazardhunt.world.scenario import (
     ScenarioError,
     format_validation_error,
-    scenario_data,
     scenario_from_data,
 )
 
@@ -117,6 +120,14 @@ class _CaseHuman(_CaseTable):
     """The human's actions, one [speed, turn] pair per decision, as the env takes them."""
 
 
+class _CaseRequirement(_CaseTable):
+    name: str = Field(min_length=1)
+    formula: str = Field(min_length=1)
+    """Signal temporal logic over hazardhunt's signals (``docs/requirements.md``): data,
+    parsed by rtamt, never run as code."""
+    description: str = ""
+
+
 class _Case(_CaseTable):
     format: int
     name: str = ""
@@ -129,6 +140,9 @@ class _Case(_CaseTable):
     classifier: _CasePlugin | None = None
     """The failure-classifier plug-in that named the expected class (None: the built-in
     one); regress never imports it from the file."""
+    requirement: _CaseRequirement | None = None
+    """For a violation case: the requirement the episode violated (the expected class is the
+    requirement and the signals that explained the violation)."""
     human: _CaseHuman
     scenario: dict[str, Any]
     """A scenario file's contents with its map inlined (checked by ``scenario_from_data``)."""
@@ -150,157 +164,6 @@ class RegressionResult:
     """One of ``VERDICTS``."""
     error: str | None = None
     """What the SUT raised, for the verdict ``error``."""
-
-
-def export_cases(
-    directory: Path,
-    out: Path,
-    *,
-    every_failure: bool = False,
-    classifier: PluginSpec | None = None,
-) -> list[Path]:
-    """Write regression cases for the failures of a run or campaign directory into ``out``.
-
-    Args:
-        directory: A run or campaign directory.
-        out: The folder for the case files (created).
-        every_failure: One case per failure, instead of one per failure class for each
-            scenario and field setting (the class's representative: the failure whose time to
-            contact is the class's median).
-        classifier: Classify every failure anew with this failure classifier plug-in; without
-            one, the classes the runs recorded count, and each case names the classifier its
-            run recorded (read as data, not imported).
-
-    Returns:
-        The case files written, in a stable order.
-
-    Raises:
-        PluginError: ``classifier`` does not load.
-    """
-    results = load_results(directory, None if classifier is None else make_classifier(classifier))
-    failures = results.failures
-    if every_failure or failures.empty:
-        chosen = failures
-    else:
-        groups = failures.groupby(["scenario", "field"], sort=True)
-        chosen = pd.concat([representatives(group) for _, group in groups], ignore_index=True)
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    configs: dict[str, Any] = {}
-    for _, row in chosen.sort_values(["run_id", "episode"]).iterrows():
-        run_id = str(row["run_id"])
-        if run_id not in configs:
-            configs[run_id] = load_run_config(results.run_directory(run_id))
-        case = _case(row, configs[run_id], classifier or configs[run_id].classifier)
-        path = out / f"{case['name']}.toml"
-        if path.resolve().parent != out.resolve():  # file_name keeps it there; never write out
-            raise CaseError(f"{case['name']!r}: not a case file name inside {out}")
-        header = (
-            f"# A failure hazardhunt found, as a regression case: {case['expected']['class']}\n"
-            f"# Re-run it with: hazardhunt regress {path.name}\n"
-        )
-        path.write_text(header + tomli_w.dumps(case), encoding="utf-8")
-        written.append(path)
-    return written
-
-
-def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[str, Any]:
-    """The contents of one case file, its class given by ``classifier`` (None: the built-in
-    one)."""
-    failure_class = str(row.get("class", "other"))
-    # The run id comes from a run's files, which anyone may have made: one safe file name.
-    name = file_name(f"{row['run_id']}__episode{int(row['episode'])}")
-    sut: dict[str, Any] = {}
-    for key in ("controller", "safety_layer"):
-        spec: PluginSpec | None = getattr(config, key)
-        if spec is not None:
-            sut[key] = _plugin_table(spec)
-    actions = np.asarray(list(row["actions"]), dtype=np.float32).reshape(-1, 2)
-    return {
-        "format": CASE_FORMAT,
-        "name": name,
-        "description": (
-            f"{failure_class}, found by {row['tester']} (seed {int(row['seed'])}) in run "
-            f"{row['run_id']} in episode {int(row['episode'])}"
-        ),
-        "environment": {
-            "field": str(row["field"]),
-            "seed": int(row["seed"]),
-            **config.env.model_dump(exclude_none=True),
-        },
-        "expected": {
-            "outcome": str(row["outcome"]),
-            "class": failure_class,
-            "sim_time": float(row["sim_time"]),
-            "contact_face": str(row.get("contact_face") or ""),
-        },
-        "found": {
-            "run_id": str(row["run_id"]),
-            "tester": str(row["tester"]),
-            "episode": int(row["episode"]),
-            "hazardhunt_version": hazardhunt.__version__,
-        },
-        **({} if classifier is None else {"classifier": _plugin_table(classifier)}),
-        "sut": sut,
-        "human": {"actions": [[float(a), float(b)] for a, b in actions]},
-        "scenario": scenario_data(config.scenario),
-    }
-
-
-def _plugin_table(spec: PluginSpec) -> dict[str, Any]:
-    """A plug-in as a case names it: where to find it is the reader's business."""
-    return {"path": spec.path, "params": dict(spec.params)}
-
-
-PYTEST_MODULE = '''"""hazardhunt's regression cases in this folder as tests: each passes once the
-SUT no longer fails it (written by ``hazardhunt export --pytest``; run ``pytest`` here)."""
-
-from pathlib import Path
-
-import pytest
-
-from hazardhunt.cases import case_files, regress_case
-{classifier_import}
-CASES = case_files(Path(__file__).parent)
-CLASSIFIER = {classifier}
-# True: the controller and safety-layer plug-ins the case files name are imported (as with
-# regress --trust-plugins); False: a case that names one is an error.
-TRUST_PLUGINS = {trust_plugins}
-
-
-@pytest.mark.parametrize("case", CASES, ids=[case.stem for case in CASES])
-def test_the_sut_no_longer_fails(case):
-    result = regress_case(case, classifier=CLASSIFIER, trust_plugins=TRUST_PLUGINS)
-    assert result.verdict == "fixed", (
-        f"{{case.name}}: {{result.verdict}} ({{result.failure_class}} at {{result.sim_time:.2f}} s)"
-    )
-'''
-"""The test module ``hazardhunt export --pytest`` writes next to the cases."""
-
-
-def write_pytest_module(
-    out: Path, classifier: PluginSpec | None = None, *, trust_plugins: bool = False
-) -> Path:
-    """Write ``test_hazardhunt_cases.py`` into the cases folder ``out``; its tests classify
-    failures with ``classifier`` (found next to the module or in the working directory), or
-    with the built-in classifier, and import the controller and safety-layer plug-ins the cases
-    name only if ``trust_plugins`` (``TRUST_PLUGINS`` in the module)."""
-    if classifier is None:
-        source = PYTEST_MODULE.format(
-            classifier_import="", classifier="None", trust_plugins=trust_plugins
-        )
-    else:
-        source = PYTEST_MODULE.format(
-            classifier_import="from hazardhunt.campaign.plugins import PluginSpec\n",
-            classifier=(
-                f"PluginSpec(\n    path={classifier.path!r},\n    params={classifier.params!r},\n"
-                "    search_path=[str(Path(__file__).parent), str(Path.cwd())],\n)"
-            ),
-            trust_plugins=trust_plugins,
-        )
-    path = out / "test_hazardhunt_cases.py"
-    path.write_text(source, encoding="utf-8")
-    return path
 
 
 def case_files(path: Path) -> list[Path]:
@@ -369,13 +232,12 @@ def regress_case(
         if isinstance(error, PluginError):
             raise
         raise CaseError(f"{path}: environment: {error}") from None
+    if case.requirement is not None:
+        simulation.requirements = (_requirement_of(path, case.requirement, simulation),)
     actions = np.asarray(case.human.actions, dtype=np.float32).reshape(-1, 2)
     result = simulation.simulate(actions)
     outcome = result.outcome or "unfinished"
-    failure_class = None
-    if outcome == "failure":
-        chosen = own_classifier or make_classifier(None, simulation.robot_params)
-        failure_class = chosen.classify(result.trajectory or (), result.summary, simulation.field)
+    failure_class = _class_of(case, result, own_classifier, simulation)
     expected = case.expected.failure_class
     sut_error = None
     if outcome == "sut_error":
@@ -389,6 +251,42 @@ def regress_case(
     return RegressionResult(
         path.name, expected, outcome, failure_class, result.summary.sim_time, verdict, sut_error
     )
+
+
+def _class_of(
+    case: _Case,
+    result: EpisodeResult,
+    classifier: FailureClassifier | None,
+    simulation: Simulation,
+) -> str | None:
+    """The replayed episode's class: of its failure, classified by ``classifier`` (None: the
+    built-in one), or of its violation of the case's requirement; None if neither."""
+    if result.outcome == "sut_error":
+        return None
+    if case.requirement is not None:
+        if not result.verdicts[case.requirement.name].violated:
+            return None
+        return violation_class(case.requirement.name, result)
+    if result.outcome != "failure":
+        return None
+    chosen = classifier or make_classifier(None, simulation.robot_params)
+    return chosen.classify(result.trajectory or (), result.summary, simulation.field)
+
+
+def _requirement_of(
+    path: Path, requirement: _CaseRequirement, simulation: Simulation
+) -> StlRequirement:
+    """The case's requirement, its formula parsed (not run: it is data)."""
+    try:
+        return StlRequirement(
+            requirement.name,
+            requirement.formula,
+            requirement.description,
+            where=f"{path} [requirement]",
+            sampling_period=simulation.controller.control_period,
+        )
+    except RequirementError as error:
+        raise CaseError(str(error)) from None
 
 
 def _read_case(path: Path) -> _Case:
