@@ -268,7 +268,8 @@ def run_command(
         str | None,
         typer.Option(
             help="Search on this requirement (one of --requirement's): the episode-level "
-            "testers hunt its violations, guided by its robustness, instead of unsafe contacts."
+            "testers hunt its violations, guided by its robustness, instead of unsafe contacts; "
+            "ppo-max learns from it as its reward."
         ),
     ] = None,
     json_output: Annotated[

@@ -205,8 +205,8 @@ def test_a_search_on_a_requirement_closes_in_on_its_violations(tmp_path):
     [
         (["--search-on", "separation"], "is not one of the run's requirements"),
         (
-            ["--tester", "ppo-max", "--requirement", "separation", "--search-on", "separation"],
-            "learns from its reward",
+            ["--tester", "ppo-acc", "--requirement", "separation", "--search-on", "separation"],
+            "learns from the risk summed per decision",
         ),
     ],
 )

@@ -125,3 +125,51 @@ def test_learning_leaves_nothing_in_the_temporary_directory(tmp_path, monkeypatc
     # torch keeps one cache directory per user there (torchinductor_<user>), made once and reused.
     left = [path.name for path in tmp_path.iterdir() if not path.name.startswith("torchinductor_")]
     assert left == []
+
+
+def test_ppo_max_searching_on_a_requirement_learns_from_its_robustness(monkeypatch, tmp_path):
+    from hazardhunt.testers import ppo
+    from hazardhunt.testers.objective import RequirementRule
+
+    config = RunConfig(
+        **CASES["ppo-acc"] | {"tester": "ppo-max"},
+        seed=0,
+        episodes=3,
+        requirements=["slow-near-people"],
+        search_on="slow-near-people",
+    )
+    recorded = []
+    recorder = EpisodeRecorder(
+        AGVEnv.wrapping(simulation_of(config), "max"), on_episode=recorded.append
+    )
+    recorder.objective = RequirementRule("slow-near-people")
+    rewards: list[float] = []
+    step = ppo.RequirementReward.step
+
+    def logged(self, action):
+        stepped = step(self, action)
+        rewards.append(stepped[1])
+        return stepped
+
+    monkeypatch.setattr(ppo.RequirementReward, "step", logged)
+    tester = make_tester("ppo-max", 0, SMALL_PPO)
+    tester.explore(recorder, 3)
+    # 0 until each episode's last decision, then 100 x the score of its robustness r:
+    # 1 / (1 + r) while kept, 1 - r once violated; the risk plays no part.
+    last = [len(record.result.actions) for record in recorded]
+    ends = [sum(last[: i + 1]) - 1 for i in range(len(last))]
+    assert [i for i, reward in enumerate(rewards) if reward != 0.0] == ends
+    for index, record in zip(ends, recorded, strict=True):
+        robustness = record.result.verdicts["slow-near-people"].robustness
+        score = 1 - robustness if robustness < 0 else 1 / (1 + robustness)
+        assert rewards[index] == pytest.approx(100 * score)
+    # A copy of the env in a worker process gives the same reward.
+    worker_env = ppo._ReporterFactory(recorder)()
+    worker_env.reset(seed=0)
+    for action in recorded[0].result.actions:
+        _, reward, terminated, truncated, _ = worker_env.step(action)
+    assert terminated or truncated
+    assert reward == pytest.approx(rewards[ends[0]])
+    tester.save(tmp_path)
+    saved = json.loads((tmp_path / "hyperparameters.json").read_text())
+    assert saved["reward"] == "requirement:slow-near-people"

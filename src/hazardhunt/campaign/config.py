@@ -321,8 +321,8 @@ class RunConfig(_Strict):
     library, requirements files, or ``FILE.toml:NAME`` (``docs/requirements.md``)."""
     search_on: str | None = None
     """The name of one of ``requirements`` the episode-level testers search on (its
-    violations and robustness in place of unsafe contacts and risk); None: the contact
-    rule."""
+    violations and robustness in place of unsafe contacts and risk) and ``ppo-max`` learns
+    from; None: the contact rule."""
 
     @field_validator("requirements")
     @classmethod
@@ -407,7 +407,7 @@ class CampaignConfig(_Strict):
     """Requirements beyond the contact rule every run judges its episodes by (see
     :attr:`RunConfig.requirements`); a file is found next to the campaign file."""
     search_on: str | None = None
-    """The requirement the episode-level testers search on (:attr:`RunConfig.search_on`)."""
+    """The requirement the testers search on (:attr:`RunConfig.search_on`)."""
 
     @field_validator("requirements")
     @classmethod
@@ -517,18 +517,27 @@ def _check_search_on(
     name: str, requirements: list[str], tester: str, params: dict[str, Any]
 ) -> None:
     """Raises a validation error at ``search_on`` unless it names one of the requirements and
-    the tester searches episode by episode (a learning tester follows its reward)."""
+    the tester can search on it: an episode-level tester, or ``ppo-max`` (whose reward becomes
+    the requirement's; not ``ppo-acc``, which sums the risk per decision, nor a novelty bonus,
+    which pays for new contacts)."""
     names = [requirement.name for requirement in requirements_of(requirements)]
     if name not in names:
         known = ", ".join(names) or "none: name one with requirements / --requirement"
         raise invalid(("search_on",), f"is not one of the run's requirements ({known})", name)
     method = params.get("method", tester)
     registered = TESTERS.get(method) if isinstance(method, str) else None
-    if registered is not None and not isinstance(registered.factory, type):
+    if registered is None or isinstance(registered.factory, type):
+        return  # an episode-level tester, or one of the user's own
+    try:
+        built = make_tester(method, 0, {k: v for k, v in params.items() if k != "method"})
+    except TesterParameterError:
+        return  # reported as the parameter's own error
+    if getattr(built, "reward", "max") != "max" or getattr(built, "novelty", 0.0) > 0.0:
         raise invalid(
             ("search_on",),
-            f"tester {tester!r} learns from its reward; search on a requirement with an "
-            "episode-level tester (portfolio, cem, qd)",
+            f"tester {tester!r} learns from the risk summed per decision or from new "
+            "contacts; search on a requirement with ppo-max (the requirement becomes its "
+            "maximum-style reward) or an episode-level tester (portfolio, cem, qd)",
             name,
         )
 

@@ -3,6 +3,10 @@
 The failures PPO runs into while it learns are the result; the final policy is a by-product,
 saved for inspection. Hyper-parameters are SB3's defaults (as the study) unless the campaign
 file overrides them.
+
+A run that searches on a requirement (``--search-on NAME``) gives ``ppo-max`` that
+requirement's robustness as its maximum-style reward instead of the risk
+(:class:`RequirementReward`).
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from hazardhunt.testers.base import (
 )
 from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES
 from hazardhunt.testers.novelty import FailureArchive
+from hazardhunt.testers.objective import ContactRule, Objective
 
 NOVELTY_CAP = 1.5
 """The largest descriptor distance the bonus pays for (the first failure's is infinite)."""
@@ -67,6 +72,34 @@ def ppo_defaults() -> dict[str, Any]:
 
 MAX_NOVELTY = 1e6
 """The largest weight of the novelty bonus (the risk reward is at most 200)."""
+
+REQUIREMENT_REWARD_SCALE = 100.0
+"""A requirement reward's scale: the objective's score (1 at the border of a violation, more
+the deeper the violation) times this, near the risk reward's range (up to 200), so that SB3's
+default hyper-parameters suit both."""
+
+
+class RequirementReward(gym.Wrapper[Any, Any, Any, Any]):
+    """A maximum-style reward from a requirement: 0 until an episode's last decision, then
+    :data:`REQUIREMENT_REWARD_SCALE` x the objective's score of the episode (from its
+    robustness ``r``: ``1 / (1 + r)`` while kept, ``1 - r`` once violated), in place of the
+    risk."""
+
+    def __init__(self, env: gym.Env[Any, Any], objective: Objective) -> None:
+        super().__init__(env)
+        self.objective = objective
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        observation, _, terminated, truncated, info = self.env.step(action)
+        reward = 0.0
+        if terminated or truncated:
+            agv = self.env.unwrapped
+            assert isinstance(agv, AGVEnv)
+            score = self.objective.score(agv.simulation.result(keep_trajectory=False))
+            reward = REQUIREMENT_REWARD_SCALE * score
+            info = {**info, "requirement_score": score}
+        return observation, reward, terminated, truncated, info
+
 
 MAX_ROLLOUT = 1_000_000
 """The most decisions one rollout may hold (``n_steps`` x ``n_envs``): PPO keeps them all in
@@ -242,6 +275,8 @@ class PPOTester:
         self.hyperparameters = defaults | params
         """The effective PPO arguments (defaults overridden by ``params``)."""
         self.model: PPO | None = None
+        self.search_on: str | None = None
+        """The requirement whose robustness was the reward (None: the risk)."""
 
     def explore(self, env: EpisodeRecorder, episodes: int) -> None:
         """Learn on ``env`` until it has recorded ``episodes`` episodes.
@@ -253,12 +288,16 @@ class PPOTester:
         """
         # SPEC 9: one thread per process; more only contend with the NMPC and other runs.
         torch.set_num_threads(1)
+        self.search_on = None if isinstance(env.objective, ContactRule) else env.objective.name
         learning_env: gym.Env[Any, Any] | VecEnv = env
+        if self.search_on is not None:
+            learning_env = RequirementReward(env, env.objective)
         if self.n_envs > 1:
             learning_env = RecordingVecEnv(env, self.n_envs, episodes)
         if self.novelty > 0:
             if not isinstance(learning_env, VecEnv):
-                learning_env = DummyVecEnv([lambda: env])
+                single = learning_env
+                learning_env = DummyVecEnv([lambda: single])
             learning_env = NoveltyBonus(learning_env, self.novelty, self.novelty_neighbours)
         try:
             self.model = PPO(
@@ -300,7 +339,7 @@ class PPOTester:
         self.model.save(directory / "ppo.zip")
         settings = {
             "tester": self.name,
-            "reward": self.reward,
+            "reward": self.reward if self.search_on is None else f"requirement:{self.search_on}",
             "policy": "MlpPolicy",
             "seed": self.seed,
             "device": "cpu",
@@ -349,12 +388,15 @@ class _ReporterFactory:
         self.env = agv if self.simulation_factory is None else None
         self.reward: RewardKind = agv.reward_kind
         self.keep_trajectory = recorder.keep_trajectory
+        self.objective = recorder.objective
 
     def __call__(self) -> gym.Env[Any, Any]:
-        env = self.env
+        env: gym.Env[Any, Any] | None = self.env
         if env is None:
             assert self.simulation_factory is not None
             env = AGVEnv.wrapping(self.simulation_factory(), self.reward)
+        if not isinstance(self.objective, ContactRule):
+            env = RequirementReward(env, self.objective)
         return _EpisodeReporter(env, self.keep_trajectory)
 
 
