@@ -393,7 +393,11 @@ def _announcer() -> Callable[[str], None]:
 def replay(
     run_directory: Annotated[Path, typer.Argument(help="A run directory.")],
     episode: Annotated[
-        int, typer.Option(help="The episode of the failure, as the run numbers it.")
+        int,
+        typer.Option(
+            help="The episode of the failure (or of a requirement's violation), as the run "
+            "numbers it."
+        ),
     ],
     gif: Annotated[Path | None, typer.Option(help="Write an animation of the replay.")] = None,
     controller: Annotated[
@@ -416,6 +420,9 @@ def replay(
 ) -> None:
     """Re-simulate a recorded failure and confirm it ends the same way at the same time.
 
+    An episode that violated a requirement beyond the contact rule must also violate it again
+    by the same robustness, judged by the formula the run recorded with the violation.
+
     A run whose controller or safety layer is a plug-in replays only with that plug-in named
     (--controller, --safety-layer) or with --trust-plugins: a run directory is data.
     """
@@ -435,6 +442,12 @@ def replay(
         f"{replay.recorded_sim_time:.2f} s, replayed {replay.result.outcome} at "
         f"{replay.result.summary.sim_time:.2f} s: {verdict}"
     )
+    for name, robustness in replay.recorded_robustness.items():
+        again = replay.result.verdicts.get(name)
+        console.print(
+            f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
+            f"{'none' if again is None else f'{again.robustness:.6g}'}"
+        )
     if gif is not None:
         from hazardhunt.env.rendering import animate_episode
 

@@ -209,3 +209,35 @@ def test_a_trusted_plug_in_is_not_looked_for_where_the_file_says(run_with_failur
     assert done.returncode == 2
     assert "cannot import module 'marker_sut'" in done.stderr
     assert not marker.exists()
+
+
+def test_a_requirements_violation_replays_by_the_formula_recorded_with_it(tmp_path):
+    mine = tmp_path / "mine.toml"
+    mine.write_text('[requirements.wide-berth]\nformula = "always(clearance >= 1.5)"\n')
+    directory = tmp_path / "run"
+    config = RunConfig(
+        scenario="crossing",
+        field="2m",
+        tester="random",
+        seed=0,
+        episodes=12,
+        requirements=[str(mine)],
+    )
+    record_run(config, directory)
+    mine.unlink()  # the run's file is gone: the formula recorded with the violation judges
+    violations = pd.read_parquet(directory / "violations.parquet")
+    failures = set(pd.read_parquet(directory / "failures.parquet")["episode"])
+    kept_apart = violations[~violations["episode"].isin(failures)]
+    assert not kept_apart.empty, "the fixture needs a violation without a contact"
+    row = kept_apart.iloc[0]
+    replay = replay_failure(directory, int(row["episode"]))
+    assert replay.matches
+    assert replay.result.verdicts["wide-berth"].robustness == row["robustness"]
+    done = hazardhunt("replay", directory, "--episode", int(row["episode"]))
+    assert done.returncode == 0, done.stderr
+    assert "reproduced" in done.stdout
+    assert f"requirement wide-berth: recorded robustness {row['robustness']:.6g}" in done.stdout
+    # A violation whose record says another robustness is not reproduced.
+    violations.loc[violations.index == row.name, "robustness"] = row["robustness"] - 0.1
+    violations.to_parquet(directory / "violations.parquet")
+    assert not replay_failure(directory, int(row["episode"])).matches

@@ -326,8 +326,9 @@ class RunConfig(_Strict):
 
     @field_validator("requirements")
     @classmethod
-    def _requirements_read(cls, value: list[str]) -> list[str]:
-        requirements_of(value)  # a formula that cannot be monitored stops the run here
+    def _requirements_read(cls, value: list[str], info: ValidationInfo) -> list[str]:
+        if not _stored(info):
+            requirements_of(value)  # a formula that cannot be monitored stops the run here
         return value
 
     @field_validator("field")
@@ -355,9 +356,9 @@ class RunConfig(_Strict):
         return values
 
     @model_validator(mode="after")
-    def _runs_as_configured(self) -> RunConfig:
+    def _runs_as_configured(self, info: ValidationInfo) -> RunConfig:
         _check_built_in_controller(self.env, self.controller)
-        if self.search_on is not None:
+        if self.search_on is not None and not _stored(info):
             _check_search_on(self.search_on, self.requirements, self.tester, self.tester_params)
         if self.tester_plugin is None:
             if "method" not in self.tester_params:
@@ -511,6 +512,16 @@ class CampaignConfig(_Strict):
             for tester in self.testers
             for seed in self.seeds
         ]
+
+
+STORED = {"stored": True}
+"""The validation context of a configuration read back from a run directory: a record of what
+ran, whose requirement files need not be where they were (the run's violations carry their
+formulas)."""
+
+
+def _stored(info: ValidationInfo) -> bool:
+    return isinstance(info.context, dict) and bool(info.context.get("stored"))
 
 
 def _check_search_on(

@@ -1,5 +1,8 @@
 """Re-simulate a recorded failure from its record and check that it ends the same way.
 
+A requirement's violation (``violations.parquet``) replays the same way, judged again by the
+formula the run recorded with it: it must reproduce its robustness too.
+
 A run directory is data: a controller or safety layer its ``config.json`` names is imported
 only when the caller names it again or trusts the run's plug-ins
 (:func:`hazardhunt.campaign.plugins.allowed_plugin`).
@@ -8,8 +11,8 @@ only when the caller names it again or trusts the run's plug-ins
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,15 +20,18 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from hazardhunt.campaign.config import RunConfig
+from hazardhunt.campaign.config import STORED, RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import simulation_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.spec.requirements import Requirement, RequirementError, StlRequirement
 from hazardhunt.world.scenario import format_validation_error
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""
+ROBUSTNESS_TOLERANCE = 1e-9
+"""Largest difference of a requirement's robustness between the record and the replay."""
 
 
 class ReplayError(InputError):
@@ -43,13 +49,22 @@ class ReplayResult:
     """The replayed episode, with its trajectory."""
     simulation: Simulation
     """The simulation after the replay (for pictures and animations)."""
+    recorded_robustness: dict[str, float] = field(default_factory=dict)
+    """The robustness of each requirement the episode violated, as recorded."""
 
     @property
     def matches(self) -> bool:
-        """Same outcome at the same simulated time."""
+        """Same outcome at the same simulated time, and each recorded violation again with
+        the same robustness."""
+        verdicts = self.result.verdicts
         return (
             self.result.outcome == self.recorded_outcome
             and abs(self.result.summary.sim_time - self.recorded_sim_time) <= TIME_TOLERANCE
+            and all(
+                name in verdicts
+                and abs(verdicts[name].robustness - robustness) <= ROBUSTNESS_TOLERANCE
+                for name, robustness in self.recorded_robustness.items()
+            )
         )
 
 
@@ -70,14 +85,15 @@ def load_run_config(run_directory: Path) -> RunConfig:
     if not isinstance(stored, dict) or not isinstance(stored.get("run"), dict):
         raise ReplayError(f"{config_path}: not a run's configuration (no run table)")
     try:
-        return RunConfig.model_validate(stored["run"])
+        return RunConfig.model_validate(stored["run"], context=STORED)
     except ValidationError as error:
         problem = format_validation_error(error)
         raise ReplayError(f"{config_path}: not a run's configuration: run.{problem}") from None
 
 
 def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str, Any]]:
-    """The run's configuration and the failure's row."""
+    """The run's configuration and the failure's row (or, for an episode that violated a
+    requirement without a failure, its first violation's row)."""
     config = load_run_config(run_directory)
     failures_path = run_directory / "failures.parquet"
     if not failures_path.is_file():
@@ -85,12 +101,25 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
     failures = pd.read_parquet(failures_path)
     match = failures[failures["episode"] == episode]
     if match.empty:
+        violations = load_violations(run_directory, episode)
+        if violations:
+            return config, violations[0]
         known = ", ".join(str(i) for i in failures["episode"].head(10))
         raise ReplayError(
             f"{run_directory}: no failure in episode {episode} (the run recorded "
             f"{len(failures)}{': ' + known if known else ''}{' ...' if len(failures) > 10 else ''})"
         )
     return config, match.iloc[0].to_dict()
+
+
+def load_violations(run_directory: Path, episode: int) -> list[dict[str, Any]]:
+    """The rows of ``violations.parquet`` for one episode (none for a run without
+    requirements beyond the contact rule)."""
+    path = run_directory / "violations.parquet"
+    if not path.is_file():
+        return []
+    violations = pd.read_parquet(path)
+    return list(violations[violations["episode"] == episode].to_dict("records"))
 
 
 def names_sut_plugins(config: RunConfig) -> bool:
@@ -133,11 +162,20 @@ def allowed_sut(
     return config.model_copy(update=allowed)
 
 
-def replay_actions(config: RunConfig, actions: Any) -> tuple[Simulation, EpisodeResult]:
-    """Play one episode of a run's simulation with recorded actions; the simulation after it
-    and the episode's result (with its trajectory). This imports the plug-ins ``config``
-    names: a configuration read back from a file goes through :func:`allowed_sut` first."""
-    simulation = simulation_of(config)
+def replay_actions(
+    config: RunConfig,
+    actions: Any,
+    requirements: Sequence[Requirement] = (),
+    simulation: Simulation | None = None,
+) -> tuple[Simulation, EpisodeResult]:
+    """Play one episode of a run's simulation (``simulation``, else built from ``config``)
+    with recorded actions, judged by ``requirements`` (not by the run's requirement files,
+    which need not be where they were); the simulation after it and the episode's result
+    (with its trajectory). This imports the plug-ins ``config`` names: a configuration read
+    back from a file goes through :func:`allowed_sut` first."""
+    if simulation is None:
+        simulation = simulation_of(config.model_copy(update={"requirements": []}))
+    simulation.requirements = tuple(requirements)
     actions = np.asarray([list(action) for action in actions], dtype=np.float32).reshape(-1, 2)
     return simulation, simulation.simulate(actions)
 
@@ -151,7 +189,8 @@ def replay_failure(
     trust_plugins: bool = False,
     announce: Callable[[str], None] | None = None,
 ) -> ReplayResult:
-    """Replay the failure of one episode of a run with its recorded actions.
+    """Replay the failure of one episode of a run with its recorded actions (or its
+    violation of a requirement: :class:`ReplayResult` checks the robustness too).
 
     A run with the built-in SUT replays as it is. A controller or safety layer the run names
     is imported only when given again (``controller``, ``safety_layer``: another SUT, or the
@@ -159,12 +198,17 @@ def replay_failure(
     module is about to be imported.
 
     Raises:
-        ReplayError: The run directory or the failure does not exist.
+        ReplayError: The run directory or the failure does not exist, or a violation's
+            recorded formula does not parse.
         UntrustedPluginError: The run names a plug-in that is neither given nor trusted;
             nothing has been imported.
         PluginError: A plug-in does not load.
     """
     config, row = load_failure(run_directory, episode)
+    violations = load_violations(run_directory, episode)
+    # Judged by the formulas recorded with the violations, not by the run's requirement files,
+    # which may have changed or moved since.
+    config = config.model_copy(update={"requirements": []})
     config = allowed_sut(
         config,
         run_directory,
@@ -173,11 +217,34 @@ def replay_failure(
         trust_plugins=trust_plugins,
         announce=announce,
     )
-    simulation, result = replay_actions(config, row["actions"])
+    simulation = simulation_of(config)
+    period = simulation.controller.control_period
+    requirements = [_recorded_requirement(run_directory, v, period) for v in violations]
+    simulation, result = replay_actions(config, row["actions"], requirements, simulation)
     return ReplayResult(
         episode=episode,
         recorded_outcome=str(row["outcome"]),
         recorded_sim_time=float(row["sim_time"]),
         result=result,
         simulation=simulation,
+        recorded_robustness={str(v["requirement"]): float(v["robustness"]) for v in violations},
     )
+
+
+def _recorded_requirement(
+    run_directory: Path, violation: dict[str, Any], sampling_period: float
+) -> StlRequirement:
+    """The requirement of a recorded violation, from the formula stored with it (data, parsed
+    by rtamt, never run as code).
+
+    Raises:
+        ReplayError: The violation has no formula, or it does not parse.
+    """
+    name, formula = str(violation["requirement"]), str(violation.get("formula") or "")
+    where = f"{run_directory / 'violations.parquet'}"
+    if not formula:
+        raise ReplayError(f"{where}: requirement {name!r}: no formula recorded to judge it by")
+    try:
+        return StlRequirement(name, formula, where=where, sampling_period=sampling_period)
+    except RequirementError as error:
+        raise ReplayError(str(error)) from None
