@@ -367,6 +367,7 @@ def test_a_requirements_violations_export_as_cases_that_regress_checks_against_i
     for path in judged:
         assert by_case[path.name]["verdict"] == "still fails"
         assert by_case[path.name]["failure_class"] == read[path]["expected"]["class"]
+        assert by_case[path.name]["sim_time"] == pytest.approx(read[path]["expected"]["sim_time"])
     # A case whose requirement asks less is fixed; one whose formula does not parse is an error
     # naming the file.
     path = next(p for p, case in judged.items() if case["requirement"]["name"] == "wide-berth")

@@ -158,8 +158,11 @@ class RegressionResult:
     outcome: str
     """The replayed episode's outcome (``failure``, ``goal``, ``stall``, ...)."""
     failure_class: str | None
-    """The replayed failure's class, None without a failure."""
+    """The replayed failure's class (or violation's, for a case of a requirement), None
+    without one."""
     sim_time: float
+    """When the replayed episode failed (or first violated the case's requirement), else
+    ended, in s."""
     verdict: str
     """One of ``VERDICTS``."""
     error: str | None = None
@@ -248,9 +251,11 @@ def regress_case(
         verdict = "changed"
     else:
         verdict = "fixed"
-    return RegressionResult(
-        path.name, expected, outcome, failure_class, result.summary.sim_time, verdict, sut_error
-    )
+    at = result.summary.sim_time
+    if case.requirement is not None and failure_class is not None:
+        first = result.verdicts[case.requirement.name].time  # the violation's first instant
+        at = at if first is None else first
+    return RegressionResult(path.name, expected, outcome, failure_class, at, verdict, sut_error)
 
 
 def _class_of(
