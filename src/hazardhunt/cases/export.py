@@ -27,14 +27,16 @@ def export_cases(
     every_failure: bool = False,
     classifier: PluginSpec | None = None,
 ) -> list[Path]:
-    """Write regression cases for the failures of a run or campaign directory into ``out``.
+    """Write regression cases for the failures of a run or campaign directory into ``out``,
+    and for the violations of its requirements beyond the contact rule (one per requirement,
+    deciding signals, scenario and field: the deepest).
 
     Args:
         directory: A run or campaign directory.
         out: The folder for the case files (created).
-        every_failure: One case per failure, instead of one per failure class for each
-            scenario and field setting (the class's representative: the failure whose time to
-            contact is the class's median).
+        every_failure: One case per failure and per violation, instead of one per failure
+            class for each scenario and field setting (the class's representative: the
+            failure whose time to contact is the class's median).
         classifier: Classify every failure anew with this failure classifier plug-in; without
             one, the classes the runs recorded count, and each case names the classifier its
             run recorded (read as data, not imported).
