@@ -34,16 +34,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from evaluation import Case, Evaluation
+from evaluation import Case, Evaluation, horizon
 from searchers import METHODS, Points, search
 
 from hazardhunt.sim import Simulation
 from hazardhunt.spec.descriptors import describe
 from hazardhunt.spec.requirements import requirements_of
+from hazardhunt.testers.objective import RequirementRule, violation_class
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 VIOLATION_SCORE = 100.0
-"""The peers' score of a violation by ``-r``: this x (1 - r), above any kept episode's."""
+"""The peers' score of a violation is this x the search objective's (``1 - r``), above any
+kept episode's (``1 / (1 + r)``)."""
 
 
 @dataclass(frozen=True)
@@ -68,18 +70,18 @@ def judge(case: Case, requirement: str, points: Points) -> list[Judged]:
         simulation.requirements = requirements_of([requirement], period)
         _simulations[key] = simulation
     simulation = _simulations[key]
-    name = simulation.requirements[0].name
+    rule = RequirementRule(simulation.requirements[0].name)
     judged = []
     for point in points:
         actions = np.clip(np.asarray(point, dtype=np.float64), -1.0, 1.0).reshape(-1, 2)
         result = simulation.simulate(actions, keep_trajectory=False)
-        verdict = result.verdicts[name]
-        r = verdict.robustness
-        score = VIOLATION_SCORE * (1.0 - r) if verdict.violated else 1.0 / (1.0 + r)
+        violated = rule.hit(result)
+        score = rule.score(result) * (VIOLATION_SCORE if violated else 1.0)
         bearing, robot_speed = describe(result.summary)[:2]
         evaluation = Evaluation(score, result.summary.outcome, bearing, robot_speed, None)
-        signals = "+".join(verdict.signals) or "unexplained"
-        judged.append(Judged(evaluation, r, f"{name}/{signals}" if verdict.violated else None))
+        robustness = result.verdicts[rule.name].robustness
+        violation = violation_class(rule.name, result) if violated else None
+        judged.append(Judged(evaluation, robustness, violation))
     return judged
 
 
@@ -93,8 +95,7 @@ def peer_row(method: str, case: Case, requirement: str, seed: int, episodes: int
         played.extend(judged)
         return [j.evaluation for j in judged]
 
-    dimension = 2 * Simulation.build(case.scenario, case.field).horizon
-    search(METHODS[method](dimension, seed), evaluate, episodes)
+    search(METHODS[method](2 * horizon(case), seed), evaluate, episodes)
     violations = [j.violation for j in played if j.violation is not None]
     return {
         "method": method,

@@ -11,7 +11,7 @@ only when the caller names it again or trusts the run's plug-ins
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,7 +25,7 @@ from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import simulation_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
-from hazardhunt.spec.requirements import Requirement, RequirementError, StlRequirement
+from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.world.scenario import format_validation_error
 
 TIME_TOLERANCE = 1e-9
@@ -163,19 +163,23 @@ def allowed_sut(
 
 
 def replay_actions(
-    config: RunConfig,
-    actions: Any,
-    requirements: Sequence[Requirement] = (),
-    simulation: Simulation | None = None,
+    config: RunConfig, actions: Any, formulas: Mapping[str, str] | None = None, where: str = ""
 ) -> tuple[Simulation, EpisodeResult]:
-    """Play one episode of a run's simulation (``simulation``, else built from ``config``)
-    with recorded actions, judged by ``requirements`` (not by the run's requirement files,
+    """Play one episode of a run's simulation with recorded actions, judged by the
+    requirements ``formulas`` (name: formula, as recorded; not the run's requirement files,
     which need not be where they were); the simulation after it and the episode's result
     (with its trajectory). This imports the plug-ins ``config`` names: a configuration read
-    back from a file goes through :func:`allowed_sut` first."""
-    if simulation is None:
-        simulation = simulation_of(config.model_copy(update={"requirements": []}))
-    simulation.requirements = tuple(requirements)
+    back from a file goes through :func:`allowed_sut` first.
+
+    Raises:
+        ReplayError: A formula does not parse (``where``: the file it came from).
+    """
+    simulation = simulation_of(config.model_copy(update={"requirements": []}))
+    period = simulation.controller.control_period
+    simulation.requirements = tuple(
+        _recorded_requirement(name, formula, where, period)
+        for name, formula in (formulas or {}).items()
+    )
     actions = np.asarray([list(action) for action in actions], dtype=np.float32).reshape(-1, 2)
     return simulation, simulation.simulate(actions)
 
@@ -206,9 +210,6 @@ def replay_failure(
     """
     config, row = load_failure(run_directory, episode)
     violations = load_violations(run_directory, episode)
-    # Judged by the formulas recorded with the violations, not by the run's requirement files,
-    # which may have changed or moved since.
-    config = config.model_copy(update={"requirements": []})
     config = allowed_sut(
         config,
         run_directory,
@@ -217,10 +218,11 @@ def replay_failure(
         trust_plugins=trust_plugins,
         announce=announce,
     )
-    simulation = simulation_of(config)
-    period = simulation.controller.control_period
-    requirements = [_recorded_requirement(run_directory, v, period) for v in violations]
-    simulation, result = replay_actions(config, row["actions"], requirements, simulation)
+    # Judged by the formulas recorded with the violations, not by the run's requirement files,
+    # which may have changed or moved since.
+    formulas = {str(v["requirement"]): str(v.get("formula") or "") for v in violations}
+    where = str(run_directory / "violations.parquet")
+    simulation, result = replay_actions(config, row["actions"], formulas, where)
     return ReplayResult(
         episode=episode,
         recorded_outcome=str(row["outcome"]),
@@ -232,7 +234,7 @@ def replay_failure(
 
 
 def _recorded_requirement(
-    run_directory: Path, violation: dict[str, Any], sampling_period: float
+    name: str, formula: str, where: str, sampling_period: float
 ) -> StlRequirement:
     """The requirement of a recorded violation, from the formula stored with it (data, parsed
     by rtamt, never run as code).
@@ -240,8 +242,6 @@ def _recorded_requirement(
     Raises:
         ReplayError: The violation has no formula, or it does not parse.
     """
-    name, formula = str(violation["requirement"]), str(violation.get("formula") or "")
-    where = f"{run_directory / 'violations.parquet'}"
     if not formula:
         raise ReplayError(f"{where}: requirement {name!r}: no formula recorded to judge it by")
     try:

@@ -297,7 +297,7 @@ class RunStore:
                         "requirement": name,
                         "formula": self.formulas.get(name, ""),
                         "robustness": verdict.robustness,
-                        "signals": "+".join(verdict.signals),
+                        "signals": verdict.decided_by,
                         "time": verdict.time,
                         "outcome": summary.outcome,
                         "sim_time": summary.sim_time,
@@ -383,7 +383,7 @@ class RunStore:
             count["violations"] += 1
             if count["first_violation_episode"] is None:
                 count["first_violation_episode"] = episode
-            signals = "+".join(verdict.signals) or "unexplained"
+            signals = verdict.decided_by
             count["decided_by"][signals] = count["decided_by"].get(signals, 0) + 1
 
     def requirement_summary(self) -> dict[str, RequirementCount]:

@@ -111,7 +111,7 @@ def _violation_case(row: pd.Series, config: Any) -> dict[str, Any]:
     """The contents of the case file of one requirement's violation, the requirement's formula
     inlined."""
     requirement = str(row["requirement"])
-    expected = f"{requirement}/{row['signals'] or 'unexplained'}"
+    expected = f"{requirement}/{row['signals']}"
     case = _episode_case(
         row, config, f"{row['run_id']}__episode{int(row['episode'])}__{requirement}"
     )

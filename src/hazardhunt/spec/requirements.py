@@ -82,6 +82,12 @@ class Verdict:
     """For a violation, the first instant of the episode the explanation points at, in s."""
 
     @property
+    def decided_by(self) -> str:
+        """The signals that explain a violation, joined (``clearance+robot_speed``), or
+        ``unexplained``."""
+        return "+".join(self.signals) or "unexplained"
+
+    @property
     def violated(self) -> bool:
         """Whether the episode violated the requirement."""
         return self.robustness < 0.0

@@ -83,5 +83,4 @@ def violation_class(name: str, result: EpisodeResult) -> str:
     """The class of a violation of the requirement ``name``: the requirement and the signals
     that explain it (``slow-near-people/clearance+robot_speed``)."""
     verdict = result.verdicts.get(name)
-    signals = "+".join(verdict.signals) if verdict is not None else ""
-    return f"{name}/{signals or 'unexplained'}"
+    return f"{name}/{'unexplained' if verdict is None else verdict.decided_by}"
