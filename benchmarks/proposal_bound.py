@@ -1,0 +1,116 @@
+"""How far can importance sampling over a model's tilts go on a case? A bound from plain Monte
+Carlo's own failures.
+
+Reads a plain Monte Carlo estimate (``hazardhunt estimate --method mc``: every episode a draw
+from the model), fits the cross-entropy estimator's proposals
+(:mod:`hazardhunt.likelihood.proposal`, with and without its penalty) to its failures, and
+reports the efficiency over plain
+Monte Carlo per counted episode that each proposal would give, ``(1 - p) / (E_p[w | failure]
+- p)`` with ``w`` the failure's likelihood ratio (the estimator's variance is ``p E_p[w |
+failure] - p^2`` per episode, plain Monte Carlo's ``p (1 - p)``):
+
+- *in-sample*: fitted to every failure, each weighed by that proposal (an upper bound: the
+  proposal has seen every mechanism there is);
+- *leave-one-out*: each failure weighed by the proposal fitted to the others (a mechanism
+  seen once is one the proposal has not seen).
+
+The efficiency an estimate reaches is lower still: its proposal is fitted to the few
+failures its own adaptation finds, and those episodes are spent, not counted.
+
+    python benchmarks/proposal_bound.py ESTIMATE_DIR \\
+        --out benchmarks/results/proposal_bound_crossing_2m.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hazardhunt.likelihood.estimators import EstimatorParams
+from hazardhunt.likelihood.proposal import Proposal
+from hazardhunt.likelihood.run import encounters_of, load_config
+
+
+def efficiency(weights: list[float], p: float) -> float:
+    """Plain Monte Carlo's variance over the estimator's, per episode."""
+    return (1.0 - p) / max(float(np.mean(weights)) - p, 1e-300)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("estimate", type=Path, help="A plain Monte Carlo estimate's directory.")
+    parser.add_argument("--out", type=Path)
+    parser.add_argument("--note", default="", help="Recorded with the result.")
+    args = parser.parse_args()
+    config = load_config(args.estimate)
+    if config.estimator.method != "mc":
+        parser.error(
+            f"{args.estimate}: a {config.estimator.method} estimate, not plain Monte Carlo"
+        )
+    table = pd.concat(
+        pd.read_parquet(path) for path in sorted((args.estimate / "batches").glob("*.parquet"))
+    )
+    table = table[~table["sut_error"]]
+    dims = encounters_of(config).dimensions
+    failures = [
+        {dim.name: float(row[f"x.{dim.name}"]) for dim in dims}
+        for _, row in table[table["failure"]].iterrows()
+    ]
+    p = len(failures) / len(table)
+    if len(failures) < 3:
+        parser.error(f"{args.estimate}: {len(failures)} failures; the bound needs at least 3")
+    defaults = EstimatorParams()
+    rows = []
+    for penalty in (0.0, defaults.penalty):
+
+        def fitted(elites: list[dict[str, float]], penalty: float = penalty) -> Proposal:
+            return Proposal.model(dims).fitted(
+                elites, np.ones(len(elites)), 1.0, defaults.defensive, penalty
+            )
+
+        everything = fitted(failures)
+        in_sample = [math.exp(everything.log_weight(f)) for f in failures]
+        left_out = [
+            math.exp(fitted(failures[:i] + failures[i + 1 :]).log_weight(f))
+            for i, f in enumerate(failures)
+        ]
+        row = {
+            "penalty": penalty,
+            "in_sample": efficiency(in_sample, p),
+            "leave_one_out": efficiency(left_out, p),
+            "in_sample_weights": in_sample,
+            "leave_one_out_weights": left_out,
+            "in_sample_proposal": everything.record(),
+        }
+        rows.append(row)
+        print(
+            f"penalty {penalty:g}: in-sample {row['in_sample']:.1f}x, leave-one-out "
+            f"{row['leave_one_out']:.1f}x (largest weight left out {max(left_out):.2f})",
+            flush=True,
+        )
+    if args.out:
+        result = {
+            "command": " ".join([Path(sys.executable).name, *sys.argv]),
+            "note": args.note,
+            "date": datetime.now(UTC).isoformat(),
+            "scenario": config.scenario,
+            "field": config.field,
+            "episodes": len(table),
+            "failures": len(failures),
+            "probability": p,
+            "failure_classes": table.loc[table["failure"], "failure_class"].tolist(),
+            "defensive": defaults.defensive,
+            "fits": rows,
+        }
+        args.out.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
