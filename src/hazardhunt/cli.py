@@ -838,6 +838,8 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
             f"({equivalent['ratio']:.1f} times these)",
             highlight=False,
         )
+    if summary.get("caveat"):
+        console.print(f"[yellow]note:[/yellow] {escape(summary['caveat'])}", highlight=False)
     if summary["sut_errors"]:
         bound = summary["untested"]["failure_or_untested"]["high"]
         err_console.print(

@@ -159,6 +159,15 @@ def cross_entropy_repeated(tmp_path, toy, repetitions=30):
     return covered, estimates
 
 
+def test_an_importance_sampling_estimate_says_what_its_interval_does_not_cover(tmp_path):
+    config, table = toy_estimate(tmp_path, 0)
+    caveat = summarise(config, table, 4.0)["caveat"]
+    assert "missing" in caveat
+    assert "--method mc" in caveat
+    config, table = toy_estimate(tmp_path, 1, method="mc")
+    assert summarise(config, table, 4.0)["caveat"] is None  # exact: nothing to say
+
+
 def test_cross_entropy_intervals_cover_a_known_probability(tmp_path):
     toy = ClosedFormEncounters(threshold=3.5)
     covered, estimates = cross_entropy_repeated(tmp_path, toy)

@@ -130,6 +130,8 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
                 f"{equivalent['episodes_for_target']:,.0f}."
             )
         )
+    if summary.get("caveat"):
+        section.blocks.append(Text(summary["caveat"], "warning"))
     if summary.get("sut_errors"):
         section.blocks.append(Text(_untested(summary), "warning"))
     rows = [

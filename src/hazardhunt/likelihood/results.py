@@ -21,6 +21,17 @@ from hazardhunt.likelihood.splitting import SplittingPlanner, splitting_estimate
 
 TARGET_RELATIVE_ERROR = 0.3
 """The relative error the comparison with plain Monte Carlo is stated at."""
+CAVEATS = {
+    "ce": "importance sampling: the estimate and its interval cover the ways of failing its "
+    "episodes found; one its proposal seldom draws is mostly missing from both (docs/risk.md, "
+    "'How far one proposal can go'). Compare with plain Monte Carlo (--method mc) before "
+    "relying on it.",
+    "splitting": "splitting: the levels' chains explore from the episodes that seeded them; a "
+    "way of failing that none of them reaches is missing from the estimate (docs/risk.md). "
+    "Compare with plain Monte Carlo (--method mc) before relying on it.",
+}
+"""What an estimator's interval does not cover, said beside its estimate (plain Monte Carlo's
+interval is exact: nothing to say)."""
 
 
 def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> dict[str, Any]:
@@ -63,6 +74,7 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         "untested": untested,
         "classes": classes,
         "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
+        "caveat": CAVEATS.get(config.estimator.method),
         "convergence": points,
         "most_likely": most_likely(table),
     }
