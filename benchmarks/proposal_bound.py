@@ -46,18 +46,16 @@ def efficiency(weights: list[float], p: float) -> float:
     return (1.0 - p) / max(float(np.mean(weights)) - p, 1e-300)
 
 
-def _weight(
+def _fitted(
     dims: Sequence[Dimension],
     elites: list[dict[str, float]],
     classes: list[str],
-    x: dict[str, float],
     family: str,
     penalty: float,
     defensive: float,
-) -> float:
-    """The likelihood ratio of ``x`` under the proposal fitted to ``elites``: the estimator's
-    one proposal, or a mixture of one per failure class, each weighted by its share of the
-    elites (always with the model's ``defensive`` share)."""
+) -> list[tuple[float, Proposal]]:
+    """The proposal fitted to ``elites`` as (share, tilts) pairs: the estimator's one proposal,
+    or one per failure class, each with its class's share of the elites."""
     groups = (
         [elites]
         if family == "one"
@@ -66,10 +64,18 @@ def _weight(
             for name in sorted(set(classes))
         ]
     )
-    tilt = 0.0
-    for group in groups:
-        proposal = Proposal.model(dims).fitted(group, np.ones(len(group)), 1.0, defensive, penalty)
-        tilt += len(group) / len(elites) * math.exp(proposal.log_ratio(x))
+    return [
+        (
+            len(group) / len(elites),
+            Proposal.model(dims).fitted(group, np.ones(len(group)), 1.0, defensive, penalty),
+        )
+        for group in groups
+    ]
+
+
+def _weight(mixture: list[tuple[float, Proposal]], x: dict[str, float], defensive: float) -> float:
+    """The likelihood ratio of ``x`` under the mixture, with the model's ``defensive`` share."""
+    tilt = sum(share * math.exp(proposal.log_ratio(x)) for share, proposal in mixture)
     return 1.0 / (defensive + (1.0 - defensive) * tilt)
 
 
@@ -102,25 +108,17 @@ def main() -> None:
     for family in ("one", "per class"):
         for penalty in (0.0, defaults.penalty):
 
-            def weigh(
-                train: list[int],
-                x: dict[str, float],
-                family: str = family,
-                penalty: float = penalty,
-            ) -> float:
-                return _weight(
-                    dims,
-                    [failures[i] for i in train],
-                    [classes[i] for i in train],
-                    x,
-                    family,
-                    penalty,
-                    defaults.defensive,
-                )
+            def fitted(train: list[int], family: str = family, penalty: float = penalty):
+                elites = [failures[i] for i in train]
+                names = [classes[i] for i in train]
+                return _fitted(dims, elites, names, family, penalty, defaults.defensive)
 
-            everyone = list(range(len(failures)))
-            in_sample = [weigh(everyone, f) for f in failures]
-            left_out = [weigh(everyone[:i] + everyone[i + 1 :], f) for i, f in enumerate(failures)]
+            everyone = fitted(list(range(len(failures))))
+            in_sample = [_weight(everyone, f, defaults.defensive) for f in failures]
+            left_out = [
+                _weight(fitted([j for j in range(len(failures)) if j != i]), f, defaults.defensive)
+                for i, f in enumerate(failures)
+            ]
             row = {
                 "proposal": family,
                 "penalty": penalty,
