@@ -831,15 +831,16 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
         )
     console.print(table)
     equivalent = summary["monte_carlo_equivalent"]
-    if equivalent is not None:
+    if equivalent is not None and not summary.get("levels_warning"):
         console.print(
             f"relative error {equivalent['relative_error']:.0%}: plain Monte Carlo would need "
             f"about {equivalent['episodes_for_same_error']:,.0f} episodes for it "
             f"({equivalent['ratio']:.1f} times these)",
             highlight=False,
         )
-    if summary.get("caveat"):
-        console.print(f"[yellow]note:[/yellow] {escape(summary['caveat'])}", highlight=False)
+    for note in ("caveat", "levels_warning"):
+        if summary.get(note):
+            console.print(f"[yellow]note:[/yellow] {escape(summary[note])}", highlight=False)
     if summary["sut_errors"]:
         bound = summary["untested"]["failure_or_untested"]["high"]
         err_console.print(

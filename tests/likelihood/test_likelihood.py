@@ -225,6 +225,33 @@ def test_splitting_reaches_a_rare_probability_with_few_episodes(tmp_path):
     assert abs(np.median(estimates) / toy.probability - 1.0) < 0.4
 
 
+def test_a_splitting_estimate_says_how_its_levels_went_and_when_its_chains_stood_still(tmp_path):
+    toy = ClosedFormEncounters(threshold=5.0, p_looks=0.0)
+    said = {}
+    for correlation in (0.8, 0.0):  # small moves; a new independent draw every move
+        params = EstimatorParams(method="splitting", batch_size=300, correlation=correlation)
+        config = EstimateConfig(episodes=2000, seed=1, estimator=params)
+        table = EstimateRun(config, tmp_path / f"rho-{correlation}", source=toy).run()
+        summary = summarise(config, table, toy.threshold)
+        levels = summary["levels"]
+        assert levels[0]["accepted"] is None
+        assert levels[0]["correlation"] == 0.0
+        shares = np.prod([level["share"] for level in levels])
+        assert shares == pytest.approx(summary["probability"]["probability"])
+        said[correlation] = (min(level["accepted"] for level in levels[1:]), summary)
+    moving, stuck = said[0.8], said[0.0]
+    assert moving[0] > 0.1
+    assert moving[1]["levels_warning"] is None
+    # Independent draws rarely reach a high level: the chains keep few of their moves.
+    assert stuck[0] < 0.1
+    assert "the chains mostly stood still" in stuck[1]["levels_warning"]
+    # None of its last level failed: the bound is above the chance of reaching that level.
+    levels, result = stuck[1]["levels"], stuck[1]["probability"]
+    assert levels[-1]["share"] == result["probability"] == 0.0
+    assert result["high"] > np.prod([level["share"] for level in levels[:-1]])
+    assert result["high"] >= toy.probability
+
+
 def test_plain_monte_carlo_is_the_clopper_pearson_interval(tmp_path):
     toy = ClosedFormEncounters(threshold=0.0, p_looks=0.5)  # p = 0.25
     config, table = toy_estimate(tmp_path, 0, episodes=1000, method="mc", source=toy)
@@ -235,7 +262,8 @@ def test_plain_monte_carlo_is_the_clopper_pearson_interval(tmp_path):
     assert (table["log_weight"] == 0).all()
 
 
-def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path):
+@pytest.mark.parametrize("written_before", [False, True])
+def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path, written_before):
     toy = ClosedFormEncounters()
     config = EstimateConfig(
         episodes=500, seed=4, estimator=EstimatorParams(method="ce", batch_size=100)
@@ -249,6 +277,12 @@ def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         EstimateRun(config, tmp_path / "cut", source=toy).run(stop_after_two)
     assert len(list((tmp_path / "cut" / "batches").glob("*.parquet"))) == 2
+    if written_before:  # as an earlier version wrote it: without the settings added since
+        path = tmp_path / "cut" / "config.json"
+        written = json.loads(path.read_text())
+        for later in ("penalty", "fit_failures"):
+            del written["estimator"][later]
+        path.write_text(json.dumps(written))
     resumed = EstimateRun(config, tmp_path / "cut", source=toy).run()
     pd.testing.assert_frame_equal(resumed, whole)
 

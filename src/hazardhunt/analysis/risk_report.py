@@ -120,7 +120,7 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
         )
     )
     equivalent = summary.get("monte_carlo_equivalent")
-    if equivalent:
+    if equivalent and not summary.get("levels_warning"):
         section.blocks.append(
             Text(
                 f"Relative error {equivalent['relative_error']:.0%}: plain Monte Carlo would "
@@ -130,8 +130,9 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
                 f"{equivalent['episodes_for_target']:,.0f}."
             )
         )
-    if summary.get("caveat"):
-        section.blocks.append(Text(summary["caveat"], "warning"))
+    for note in ("caveat", "levels_warning"):
+        if summary.get(note):
+            section.blocks.append(Text(summary[note], "warning"))
     if summary.get("sut_errors"):
         section.blocks.append(Text(_untested(summary), "warning"))
     rows = [

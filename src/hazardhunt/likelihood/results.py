@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ import pandas as pd
 
 from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
 from hazardhunt.likelihood.run import EstimateConfig, EstimateError
-from hazardhunt.likelihood.splitting import SplittingPlanner, splitting_estimate
+from hazardhunt.likelihood.splitting import SplittingPlanner, level_records, splitting_estimate
 
 TARGET_RELATIVE_ERROR = 0.3
 """The relative error the comparison with plain Monte Carlo is stated at."""
@@ -32,6 +33,9 @@ CAVEATS = {
 }
 """What an estimator's interval does not cover, said beside its estimate (plain Monte Carlo's
 interval is exact: nothing to say)."""
+STUCK_CHAINS = 0.1
+"""A splitting level whose chains kept fewer of their moves than this is said to have mostly
+stood still."""
 
 
 def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> dict[str, Any]:
@@ -53,6 +57,7 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         overall, classes, points, counted = _splitting(config, table, classes_found, threshold)
     else:
         overall, classes, points, counted = _weighted(table, classes_found)
+    levels = _levels(config, table, threshold)
     untested = None
     if errors:
         # An encounter the SUT could not play may have been a failure: the probability of a
@@ -76,8 +81,40 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
         "caveat": CAVEATS.get(config.estimator.method),
         "convergence": points,
+        "levels": levels,
+        "levels_warning": _stuck(levels, table),
         "most_likely": most_likely(table),
     }
+
+
+def _levels(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> Any:
+    """Multilevel splitting's levels, to see how its chains went (None for the others)."""
+    if config.estimator.method != "splitting":
+        return None
+    planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+    records, _ = level_records(planner, table, table["failure"].to_numpy(bool))
+    return [asdict(record) for record in records]
+
+
+def _stuck(levels: list[dict[str, Any]] | None, table: pd.DataFrame) -> str | None:
+    """What to say of splitting levels whose chains mostly stood still (None if none did)."""
+    stuck = [
+        (index, level["accepted"])
+        for index, level in enumerate(levels or [])
+        if level["accepted"] is not None and level["accepted"] < STUCK_CHAINS
+    ]
+    if not stuck:
+        return None
+    shown = ", ".join(f"level {index} kept {accepted:.0%}" for index, accepted in stuck)
+    distinct = int(table["failure"].sum())
+    return (
+        f"splitting: the chains mostly stood still ({shown} of their moves), so the levels' "
+        f"shares rest on few distinct episodes ({distinct} distinct "
+        f"failure{'' if distinct == 1 else 's'}) and neither the estimate nor its interval "
+        "can be relied on, nor what plain Monte Carlo would need for its error; more "
+        "episodes per level (--batch-size) give the chains more starts (docs/risk.md, 'How "
+        "far splitting can go')."
+    )
 
 
 def _weighted(

@@ -241,8 +241,10 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     wanted = config.model_dump(mode="json")
     if path.exists():
         try:
-            found = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as error:
+            # Read as a configuration, so that settings added since it was written take
+            # their defaults: an estimate of an earlier version resumes.
+            found = EstimateConfig.model_validate_json(path.read_text()).model_dump(mode="json")
+        except (OSError, ValidationError) as error:
             raise InputError(
                 f"{path}: does not read as an estimate's configuration: {error}"
             ) from None

@@ -23,6 +23,7 @@ failure replays from its row; the levels are recomputed from the stored scores.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -161,41 +162,83 @@ class SplittingPlanner(PlannerBase):
         return PlannedBatch(draws, columns, {"level": level, "threshold": threshold})
 
 
+@dataclass(frozen=True)
+class LevelRecord:
+    """How one level of a splitting estimate went (``levels`` in ``estimate.json``)."""
+
+    threshold: float
+    """The score every sample of the level reached (-inf for the first)."""
+    samples: int
+    share: float
+    """The share of the level's samples that reached the next level (the last level's:
+    that the event marks)."""
+    correlation: float
+    """Au and Beck's ``gamma``: how much the correlation along the chains inflates the
+    share's variance (0: independent samples; 0 for the first level, plain Monte Carlo)."""
+    accepted: float | None
+    """The share of the chains' moves that reached the level and were kept (None for the
+    first level). Few: the chains mostly stand still, and ``correlation`` is large."""
+
+    @property
+    def squared_cv(self) -> float:
+        """The share's squared coefficient of variation (Au and Beck, eq. 28)."""
+        return (1.0 - self.share) / (self.samples * self.share) * (1.0 + self.correlation)
+
+
+def level_records(
+    planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
+) -> tuple[list[LevelRecord], Progress]:
+    """The levels of a splitting estimate's episodes (``table``, in order), each level's share
+    taken of ``event`` at the last level. A level none of whose samples reaches on is the
+    last one recorded.
+
+    Raises:
+        ValueError: The first level is not complete.
+    """
+    state = planner.progress(table)
+    scores = table["score"].to_numpy(float)
+    if not state.levels:
+        raise ValueError("the first level is not complete")
+    records = []
+    for index, level in enumerate(state.levels):
+        if index == len(state.levels) - 1:
+            marks = [[bool(event[r]) for r in chain] for chain in level.states]
+        else:
+            cut = state.levels[index + 1].threshold
+            marks = [[bool(scores[r] >= cut) for r in chain] for chain in level.states]
+        share = float(np.mean([m for chain in marks for m in chain]))
+        samples = sum(len(chain) for chain in marks)
+        accepted = None
+        if index > 0:
+            moves = [(a, b) for chain in level.states for a, b in itertools.pairwise(chain)]
+            accepted = float(np.mean([a != b for a, b in moves])) if moves else None
+        gamma = 0.0 if index == 0 or share <= 0.0 else _chain_correlation(marks, share)
+        records.append(LevelRecord(level.threshold, samples, share, gamma, accepted))
+        if share <= 0.0:
+            break
+    return records, state
+
+
 def splitting_estimate(
     planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
 ) -> tuple[Estimate, Progress]:
     """The probability of ``event`` (a mark per row: failures, or failures of one class) from a
     splitting estimate's episodes, with the log-normal interval on Au and Beck's coefficient of
     variation."""
-    state = planner.progress(table)
-    scores = table["score"].to_numpy(float)
-    levels = state.levels
-    if not levels:
-        raise ValueError("the first level is not complete")
-    log_p, cv, reached = 0.0, 0.0, 0.0
-    for index, level in enumerate(levels):
-        last = index == len(levels) - 1
-        if last:
-            marks = [[bool(event[r]) for r in chain] for chain in level.states]
-        else:
-            cut = levels[index + 1].threshold
-            marks = [[bool(scores[r] >= cut) for r in chain] for chain in level.states]
-        share = float(np.mean([m for chain in marks for m in chain]))
-        if share <= 0.0:
-            reached, log_p = log_p, -math.inf  # the levels before bound the probability
-            break
-        log_p += math.log(share)
-        count = sum(len(chain) for chain in marks)
-        gamma = 0.0 if index == 0 else _chain_correlation(marks, share)
-        # The levels' estimates are correlated (each level's chains start from the last
-        # level's samples): their coefficients of variation add up, Au and Beck's upper bound.
-        cv += math.sqrt((1.0 - share) / (count * share) * (1.0 + gamma))
+    records, state = level_records(planner, table, event)
     episodes, failures = len(table), int(table["failure"].sum())
-    if log_p == -math.inf:
-        bound = math.exp(reached)
+    if records[-1].share <= 0.0:
+        # A failure reaches every level: the probability is at most that of reaching the
+        # last, whose estimate (the levels before) has the upper end of its interval here.
+        reached = records[:-1]
+        bound = math.exp(sum(math.log(record.share) for record in reached))
+        bound = log_normal_interval(bound, sum(math.sqrt(r.squared_cv) for r in reached))[1]
         kind = "no failure at the last level: bound by the levels reached"
         return Estimate(0.0, 0.0, bound, episodes, failures, 0.0, None, 0.0, 0.0, kind), state
-    p = math.exp(log_p)
+    p = math.exp(sum(math.log(record.share) for record in records))
+    # The levels' estimates are correlated (each level's chains start from the last level's
+    # samples): their coefficients of variation add up, Au and Beck's upper bound.
+    cv = sum(math.sqrt(record.squared_cv) for record in records)
     low, high = log_normal_interval(p, cv)
     kind = "log-normal (Au and Beck, upper bound)"
     if not state.converged:
