@@ -14,7 +14,8 @@ Prints, at the probability ``p`` of a case (a plain Monte Carlo estimate's):
 
 - the ideal: every level's share exactly ``p0`` (a score that leads straight to the
   failures, the last level taking what is left) for ``p0`` of 0.1, 0.2, 0.3 and chain
-  correlations ``g`` of 0 (independent samples), 1 and 3;
+  correlations ``g`` of 0 (independent samples), 1 and 3; and, per ``g``, the number of
+  levels of equal share whose upper bound is largest;
 - for each splitting estimate given: its levels (share, correlation, moves kept) as
   ``estimate.json`` records them, and the efficiency they give.
 
@@ -58,6 +59,18 @@ def ideal(p: float, p0: float, gamma: float) -> dict[str, Any]:
     shares = [p0] * (levels - 1) + [last]
     gammas = [0.0] + [gamma] * (levels - 1)
     return {"p0": p0, "gamma": gamma, "levels": levels, **efficiency(shares, gammas, p0, p)}
+
+
+def best(p: float, gamma: float) -> dict[str, Any]:
+    """The ideal whose upper bound is largest: ``m`` levels of the same share ``p ** (1 / m)``
+    (a first level of plain Monte Carlo and ``m - 1`` more), ``m`` from 2 to 12."""
+    rows = []
+    for levels in range(2, 13):
+        share = p ** (1.0 / levels)
+        gammas = [0.0] + [gamma] * (levels - 1)
+        row = efficiency([share] * levels, gammas, share, p)
+        rows.append({"p0": share, "gamma": gamma, "levels": levels, **row})
+    return max(rows, key=lambda row: row["upper_bound"])
 
 
 def measured(directory: Path, p: float) -> dict[str, Any]:
@@ -106,6 +119,13 @@ def main() -> None:
             f"{row['independent_levels']:.1f}x (levels independent), "
             f"{row['upper_bound']:.1f}x (upper bound)"
         )
+    bests = [best(p, gamma) for gamma in CORRELATIONS]
+    for row in bests:
+        print(
+            f"best: {row['levels']} levels of share {row['p0']:.3f}, correlation "
+            f"{row['gamma']:g}: {row['upper_bound']:.1f}x (upper bound), "
+            f"{row['independent_levels']:.1f}x (levels independent)"
+        )
     runs = [measured(directory, p) for directory in args.splitting]
     for run in runs:
         shown = ", ".join(
@@ -137,6 +157,7 @@ def main() -> None:
                 "probability": p,
             },
             "ideal": ideals,
+            "best": bests,
             "measured": runs,
         }
         args.out.write_text(json.dumps(result, indent=1) + "\n")
