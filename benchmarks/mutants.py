@@ -16,6 +16,9 @@ A tester is a built-in name or, where the tester registry takes them, an import 
 
     python benchmarks/mutants.py --testers qd --seeds 0 1 2 --episodes 100 \
         --tester-param clear_path=true
+
+``--held-out`` runs the mutants written after the testers' defaults were settled
+(:mod:`hazardhunt.benchmark.held_out`): how the defaults do on bugs they were not tuned to.
 """
 
 from __future__ import annotations
@@ -35,12 +38,16 @@ import tomllib
 from pydantic import ValidationError
 
 from hazardhunt.benchmark.conservative import MUTANTS, ConservativeController
+from hazardhunt.benchmark.held_out import HELD_OUT_MUTANTS
 from hazardhunt.campaign.config import PluginSpec, RunConfig
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import write_json_atomic
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, format_validation_error
 
-MODULE = "hazardhunt.benchmark.conservative"
+MODULES = {
+    cls.__name__: cls.__module__ for cls in (ConservativeController, *MUTANTS, *HELD_OUT_MUTANTS)
+}
+"""The module of the original and of each mutant, by class name."""
 ORIGINAL = ConservativeController.__name__
 
 
@@ -80,7 +87,7 @@ def configs(args: argparse.Namespace) -> list[RunConfig]:
                                     seed=seed,
                                     episodes=args.episodes,
                                     tester_params=args.tester_param,
-                                    controller=PluginSpec(path=f"{MODULE}:{sut}"),
+                                    controller=PluginSpec(path=f"{MODULES[sut]}:{sut}"),
                                 )
                             )
                         except ValidationError as error:
@@ -212,7 +219,13 @@ def main() -> None:
         "--mutants",
         nargs="+",
         default=[m.__name__ for m in MUTANTS],
-        help=f"mutant class names in {MODULE}",
+        choices=[name for name in MODULES if name != ORIGINAL],
+        help="mutant class names",
+    )
+    parser.add_argument(
+        "--held-out",
+        action="store_true",
+        help="the mutants written after the defaults were settled (HELD_OUT_MUTANTS), instead",
     )
     parser.add_argument(
         "--tester-param",
@@ -226,6 +239,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/mutants.json"))
     args = parser.parse_args()
     args.tester_param = dict(args.tester_param)
+    if args.held_out:
+        args.mutants = [m.__name__ for m in HELD_OUT_MUTANTS]
     if args.early > args.episodes:
         parser.error("--early must not exceed --episodes")
 

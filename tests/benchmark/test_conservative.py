@@ -9,7 +9,6 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from hazardhunt.benchmark import conservative
 from hazardhunt.benchmark.conservative import (
     MUTANTS,
     BlindAfterRestart,
@@ -20,6 +19,11 @@ from hazardhunt.benchmark.conservative import (
     StaleTrack,
     StandingHumanInLaneOnly,
     StopDistanceConvertedTwice,
+)
+from hazardhunt.benchmark.held_out import (
+    HELD_OUT_MUTANTS,
+    AbsorbedIntoStaticMap,
+    CreepsAfterWaiting,
 )
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
@@ -152,6 +156,14 @@ def walk_alongside_then_cut_in() -> Policy:
     return policy
 
 
+def wait_beside_route_then_step_into_side() -> Policy:
+    """CreepsAfterWaiting, AbsorbedIntoStaticMap: stand still 0.4 m beside the route (out of
+    the protective field's reach), and step into the rear half of the robot's side as it
+    passes (it stands for good if it sees the human)."""
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.3)  # noqa: E731
+    return lie_in_wait((10.0, 9.1), NORTH, robot_past(10.1), attack)
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -160,6 +172,8 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     DockingMode: ("head-on", wait_near_goal_then_step_in),
     StandingHumanInLaneOnly: ("crossing", step_in_slowly),
     IgnoresHumanWalkingAlongside: ("overtaking", walk_alongside_then_cut_in),
+    CreepsAfterWaiting: ("crossing", wait_beside_route_then_step_into_side),
+    AbsorbedIntoStaticMap: ("crossing", wait_beside_route_then_step_into_side),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 
@@ -183,10 +197,12 @@ TOUCHING_ATTACKS = [
 
 
 # ------------------------------------------------------------------ tests
-@pytest.mark.parametrize("name", ["ConservativeController", *(m.__name__ for m in MUTANTS)])
-def test_every_controller_loads_as_a_plugin(name):
-    controller = build_controller(f"hazardhunt.benchmark.conservative:{name}", {})
-    assert type(controller) is getattr(conservative, name)
+@pytest.mark.parametrize(
+    "cls", [ConservativeController, *MUTANTS, *HELD_OUT_MUTANTS], ids=lambda c: c.__name__
+)
+def test_every_controller_loads_as_a_plugin(cls):
+    controller = build_controller(f"{cls.__module__}:{cls.__name__}", {})
+    assert type(controller) is cls
     assert controller.control_period == pytest.approx(0.2)
 
 
@@ -226,7 +242,7 @@ def test_a_human_who_reaches_the_original_meets_it_standing(attack, name, field)
 
 
 @pytest.mark.parametrize("field", ["none", "1.25m"])
-@pytest.mark.parametrize("mutant", MUTANTS, ids=lambda m: m.__name__)
+@pytest.mark.parametrize("mutant", MUTANTS + HELD_OUT_MUTANTS, ids=lambda m: m.__name__)
 def test_each_mutant_falls_to_its_scripted_human(mutant, field):
     scenario, killer = MUTANT_KILLERS[mutant]
     result = run(make(scenario, field, mutant()), killer())
@@ -235,7 +251,7 @@ def test_each_mutant_falls_to_its_scripted_human(mutant, field):
 
 
 def test_every_mutant_has_a_scripted_killer():
-    assert set(MUTANT_KILLERS) == set(MUTANTS)
+    assert set(MUTANT_KILLERS) == set(MUTANTS + HELD_OUT_MUTANTS)
 
 
 def test_a_robot_with_weaker_brakes_stops_further_from_a_human_in_its_way():

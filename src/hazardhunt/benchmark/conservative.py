@@ -335,7 +335,7 @@ class StandingHumanInLaneOnly(ConservativeController):
         self.standing_speed = standing_speed
 
     def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
-        if human is not None and _estimated_speed(human) < self.standing_speed:
+        if human is not None and estimated_speed(human) < self.standing_speed:
             forward, left = to_body_frame(human.position, robot.x, robot.y, robot.heading)
             in_lane = abs(left) < self.robot.width / 2 + self.human_radius
             if not (forward > 0 and in_lane):
@@ -343,7 +343,7 @@ class StandingHumanInLaneOnly(ConservativeController):
         return super().human_threatens(time, robot, human)
 
 
-def _estimated_speed(human: TrackedHuman) -> float:
+def estimated_speed(human: TrackedHuman) -> float:
     """The human's speed from its last two tracked positions, in m/s (0 from one sighting)."""
     if len(human.recent_times) < 2:
         return 0.0

@@ -1,0 +1,144 @@
+"""Mutants of the conservative controller written after the testers' defaults were settled.
+
+The mutants of :mod:`hazardhunt.benchmark.conservative` were at hand while the defaults (the
+portfolio's arms, the searchers' settings) were chosen, so a score on them flatters those
+defaults. The mutants here were written afterwards, to judge the defaults on bugs they were not
+tuned to; no default may be tuned on them (``benchmarks/mutants.py --held-out``). Like the
+others, each is a subclass of :class:`~hazardhunt.benchmark.conservative.ConservativeController`
+with one planted bug, and a plug-in::
+
+    hazardhunt run --controller hazardhunt.benchmark.held_out:CreepsAfterWaiting ...
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hazardhunt.benchmark.conservative import ConservativeController, estimated_speed
+from hazardhunt.sut.protocols import ControlCommand, RobotParams, RobotState, TrackedHuman
+from hazardhunt.sut.route import Route
+from hazardhunt.world.floor import FloorMap
+from hazardhunt.world.geometry import FloatArray
+
+
+class CreepsAfterWaiting(ConservativeController):
+    """Mutant: after standing ``patience`` seconds for a human, the robot creeps on with a stop
+    distance of ``creep_distance`` (an anti-deadlock mode).
+
+    The bug: to get through aisles where people linger, a robot that has waited long enough
+    for a human drives on at ``creep_speed`` and stops only for a human within
+    ``creep_distance``, on the belief that at a creep it can always stop in time. It cannot for
+    a human who moves: the stop distance no longer covers how far a person walks before the
+    robot stands. Exposed by a human who stands close beside the route until the robot has
+    waited, and steps into its side as it creeps past.
+    """
+
+    def __init__(
+        self,
+        patience: float = 4.0,
+        creep_speed: float = 0.3,
+        creep_distance: float = 0.2,
+        **options: float,
+    ) -> None:
+        """Args:
+        patience: How long the robot stands for a human before it creeps on, in s.
+        creep_speed: Its speed while it creeps, in m/s.
+        creep_distance: The stop distance while it creeps, in m.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.patience = patience
+        self.creep_speed = creep_speed
+        self.creep_distance = creep_distance
+        self._waiting_since: float | None = None
+        self._creeping = False
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._waiting_since = None
+        self._creeping = False
+
+    def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
+        command = super().control(time, robot, human)
+        if self._creeping and command.speed > 0.0:
+            return ControlCommand(
+                speed=min(command.speed, self.creep_speed),
+                yaw_rate=command.yaw_rate,
+                status="creeping",
+            )
+        return command
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is None:
+            return True
+        clearance = self.clearance(robot, self.human_position(time, human))
+        if self._creeping:
+            return clearance <= self.creep_distance
+        if clearance > self.stop_distance:
+            self._waiting_since = None
+            return False
+        if self._waiting_since is None:
+            self._waiting_since = time
+        self._creeping = time - self._waiting_since >= self.patience
+        return not self._creeping
+
+
+class AbsorbedIntoStaticMap(ConservativeController):
+    """Mutant: a human who stands still for ``absorb_time`` seconds becomes part of the static
+    map and is ignored until they have moved ``release_distance`` from where they stood (a
+    clutter filter).
+
+    The bug: the tracker folds objects that stop moving into the map of static obstacles (so
+    that pallets and racks are not tracked as people), and takes them out again only once they
+    have left their spot. A person who waits is such an object. Exposed by a human who stands
+    still beside the route and, as the robot passes, steps the few decimetres into its side.
+    """
+
+    def __init__(
+        self,
+        absorb_time: float = 2.0,
+        still_speed: float = 0.1,
+        release_distance: float = 0.5,
+        **options: float,
+    ) -> None:
+        """Args:
+        absorb_time: How long a human must stand still to be folded into the map, in s.
+        still_speed: Below this estimated speed a human stands still, in m/s.
+        release_distance: How far a folded-in human must move to be tracked again, in m.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.absorb_time = absorb_time
+        self.still_speed = still_speed
+        self.release_distance = release_distance
+        self._still_since: float | None = None
+        self._absorbed_at: FloatArray | None = None
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._still_since = None
+        self._absorbed_at = None
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is not None:
+            if self._absorbed_at is not None:
+                moved = float(np.hypot(*(human.position - self._absorbed_at)))
+                if moved < self.release_distance:
+                    return False
+                self._absorbed_at = None
+            if estimated_speed(human) >= self.still_speed or len(human.recent_times) < 2:
+                self._still_since = None
+            elif self._still_since is None:
+                self._still_since = time
+            elif time - self._still_since >= self.absorb_time:
+                self._absorbed_at = human.position.copy()
+                self._still_since = None
+                return False
+        return super().human_threatens(time, robot, human)
+
+
+HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
+    CreepsAfterWaiting,
+    AbsorbedIntoStaticMap,
+)
+"""The held-out mutants, one planted bug each."""
