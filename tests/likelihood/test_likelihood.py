@@ -287,6 +287,14 @@ def test_an_interrupted_estimate_resumes_with_the_same_episodes(tmp_path, writte
     pd.testing.assert_frame_equal(resumed, whole)
 
 
+def test_an_estimate_directory_whose_configuration_does_not_read_is_a_one_line_error(tmp_path):
+    (tmp_path / "config.json").write_text('{"episodes": "many"')
+    config = EstimateConfig(episodes=300, estimator=EstimatorParams(method="mc"))
+    with pytest.raises(ValueError, match=r"config\.json: ") as error:
+        EstimateRun(config, tmp_path, source=ClosedFormEncounters())
+    assert "\n" not in str(error.value)
+
+
 def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
     toy = ClosedFormEncounters()
     EstimateRun(

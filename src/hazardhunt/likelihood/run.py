@@ -240,14 +240,9 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     path = directory / "config.json"
     wanted = config.model_dump(mode="json")
     if path.exists():
-        try:
-            # Read as a configuration, so that settings added since it was written take
-            # their defaults: an estimate of an earlier version resumes.
-            found = EstimateConfig.model_validate_json(path.read_text()).model_dump(mode="json")
-        except (OSError, ValidationError) as error:
-            raise InputError(
-                f"{path}: does not read as an estimate's configuration: {error}"
-            ) from None
+        # Read as a configuration, so that settings added since it was written take their
+        # defaults: an estimate of an earlier version resumes.
+        found = load_config(directory).model_dump(mode="json")
         if found != wanted:
             differ = sorted(k for k in set(found) | set(wanted) if found.get(k) != wanted.get(k))
             raise InputError(

@@ -188,9 +188,9 @@ class LevelRecord:
 def level_records(
     planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
 ) -> tuple[list[LevelRecord], Progress]:
-    """The levels of a splitting estimate's episodes (``table``, in order), each level's share
-    taken of ``event`` at the last level. A level none of whose samples reaches on is the
-    last one recorded.
+    """The levels of a splitting estimate's episodes (``table``, in order); the last level's
+    share is that of the episodes ``event`` marks. The records end at the first level of
+    share 0 (none of its samples reached the next level, or, the last, was marked).
 
     Raises:
         ValueError: The first level is not complete.
