@@ -812,6 +812,8 @@ def estimate_command(
 
 
 def _print_estimate(summary: dict[str, Any], path: Path) -> None:
+    from hazardhunt.likelihood.results import NOTES
+
     result = summary["probability"]
     table = Table("failures per encounter", "95 % interval", "episodes", "failures", "method")
     table.add_row(
@@ -838,7 +840,7 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
             f"({equivalent['ratio']:.1f} times these)",
             highlight=False,
         )
-    for note in ("caveat", "levels_warning"):
+    for note in NOTES:
         if summary.get(note):
             console.print(f"[yellow]note:[/yellow] {escape(summary[note])}", highlight=False)
     if summary["sut_errors"]:

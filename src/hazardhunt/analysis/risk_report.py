@@ -25,6 +25,7 @@ from hazardhunt.campaign.store import write_bytes_atomic
 from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode
 from hazardhunt.errors import InputError
 from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
+from hazardhunt.likelihood.results import NOTES
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     batch_path,
@@ -130,7 +131,7 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
                 f"{equivalent['episodes_for_target']:,.0f}."
             )
         )
-    for note in ("caveat", "levels_warning"):
+    for note in NOTES:
         if summary.get(note):
             section.blocks.append(Text(summary[note], "warning"))
     if summary.get("sut_errors"):

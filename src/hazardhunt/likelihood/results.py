@@ -33,6 +33,8 @@ CAVEATS = {
 }
 """What an estimator's interval does not cover, said beside its estimate (plain Monte Carlo's
 interval is exact: nothing to say)."""
+NOTES = ("caveat", "levels_warning")
+"""The keys of ``estimate.json`` that hold what to say beside the estimate (None: nothing)."""
 STUCK_CHAINS = 0.1
 """A splitting level whose chains kept fewer of their moves than this is said to have mostly
 stood still."""
