@@ -13,6 +13,7 @@ from hazardhunt.campaign.run import record_run
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.pursuit import PursuitController
 from hazardhunt.testers.cem import CrossEntropySampler
+from hazardhunt.testers.mirror import MirrorSampler
 from hazardhunt.testers.portfolio import DEFAULT_ARMS
 from hazardhunt.testers.spaces import DecisionSpace
 
@@ -115,3 +116,17 @@ def test_the_mirror_arm_plays_the_other_side_of_failures_the_others_found(tmp_pa
     arms = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())["arms_played"]
     assert arms["aimed"]["failures"] > 0
     assert 0 < arms["mirror"]["episodes"] <= 2 * arms["mirror"]["cells_seen"]
+
+
+def test_an_arm_that_raises_while_hearing_the_others_is_dropped(tmp_path, monkeypatch):
+    def broken(self, plans, results):
+        raise ZeroDivisionError("the arm's own bug")
+
+    monkeypatch.setattr(MirrorSampler, "observe", broken)
+    with pytest.warns(RuntimeWarning, match="'mirror' raised and was dropped"):
+        summary = portfolio_run(tmp_path / "run", 70)
+    assert summary["episodes"] == 70
+    arms = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())["arms_played"]
+    assert arms["mirror"]["dropped"] == "ZeroDivisionError: the arm's own bug"
+    assert arms["mirror"]["episodes"] == 0
+    assert all(arms[name]["dropped"] is None for name in arms if name != "mirror")

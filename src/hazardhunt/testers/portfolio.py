@@ -38,10 +38,11 @@ failure does here, its class the requirement's name and the signals that explain
 
 The failures found count as known for every arm: the cross-entropy arms score a failure by its
 distance from all failures the portfolio has, so each arm is pushed away from what the others
-found. An arm that raises is dropped, with a warning in the run's record, and the others share
-its budget. The run records which arm played each episode (``tester/arms.csv``), what each arm
-found (``tester/portfolio.json``) and the quality-diversity arm's archive
-(``tester/archive.parquet``).
+found. An arm with ``observe`` (:class:`~hazardhunt.testers.search.Observer`; the mirror)
+hears every batch the others play. An arm that raises is dropped, with a warning in the run's
+record, and the others share its budget. The run records which arm played each episode
+(``tester/arms.csv``), what each arm found (``tester/portfolio.json``) and the
+quality-diversity arm's archive (``tester/archive.parquet``).
 """
 
 from __future__ import annotations
@@ -58,22 +59,22 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from hazardhunt.sim.simulation import EpisodeResult
-from hazardhunt.spec.descriptors import EMERGENCY_STOP_CODES
-from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
 from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.mirror import MirrorParams, MirrorSampler, failure_cell
 from hazardhunt.testers.novelty import FailureArchive
 from hazardhunt.testers.objective import ContactRule, violation_class
 from hazardhunt.testers.qd import QualityDiversityParams, QualityDiversitySampler
+from hazardhunt.testers.random_sampling import UniformParams, UniformSampler
 from hazardhunt.testers.search import (
+    Observer,
     Sampler,
     SearchContext,
     SearchParams,
     SearchTester,
-    SpaceParams,
     parse_params,
 )
 from hazardhunt.testers.spaces import SearchSpace
@@ -84,103 +85,6 @@ NEW_CELL_GAIN = 0.3
 """An episode's gain for a failure in a descriptor cell no arm has filled."""
 FAILURE_GAIN = 0.1
 """An episode's gain for any other failure."""
-BEARING_CELLS = 8
-"""Sectors around the robot in a descriptor cell."""
-
-
-class UniformParams(SpaceParams):
-    """Uniform random sampling's settings."""
-
-    batch_size: int = Field(default=10, ge=1, le=10_000)
-    """Episodes per batch."""
-
-
-class UniformSampler:
-    """Every number of every decision uniform in [-1, 1], the decision spaces in turn."""
-
-    def __init__(self, params: UniformParams, context: SearchContext) -> None:
-        self.params = params
-        self.rng = np.random.default_rng(context.seed)
-        self.horizon = context.horizon
-        self.batches = 0
-
-    def ask(self) -> list[Plan]:
-        spaces = self.params.space.decision_spaces
-        space = spaces[self.batches % len(spaces)]
-        shape = (self.params.batch_size, self.horizon, space.size)
-        return [Plan(space, decisions) for decisions in self.rng.uniform(-1.0, 1.0, shape)]
-
-    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
-        self.batches += 1
-
-    def record(self) -> dict[str, Any]:
-        return {}
-
-
-def failure_cell(summary: EpisodeSummary, moving_speed: float) -> tuple[int, int, int]:
-    """The descriptor cell of a failure: the sector of the robot it met the human in (of
-    :data:`BEARING_CELLS`), the safety layer's history, and whether the human was moving."""
-    sector = math.floor((summary.closest_bearing + math.pi) / math.tau * BEARING_CELLS)
-    return (
-        sector % BEARING_CELLS,
-        int(EMERGENCY_STOP_CODES[summary.closest_emergency_stop]),
-        int(summary.closest_human_speed > moving_speed),
-    )
-
-
-def mirrored_cell(cell: tuple[int, int, int]) -> tuple[int, int, int]:
-    """The cell on the robot's other side (the bearing's sign flipped)."""
-    sector, stop, moving = cell
-    return (BEARING_CELLS - 1 - sector, stop, moving)
-
-
-class MirrorParams(SearchParams):
-    """The mirror's settings."""
-
-    attempts: int = Field(default=2, ge=1, le=100)
-    """Failures per descriptor cell whose mirror image is played."""
-
-
-class MirrorSampler:
-    """Plays, for a failure any arm found, the same episode mirrored left for right
-    (:meth:`~hazardhunt.testers.spaces.DecisionSpace.mirrored`) while no failure has been seen
-    in the cell on the robot's other side: a robot that fails for a human on its left is
-    checked on its right at the cost of one episode. It proposes nothing until some arm finds
-    a failure."""
-
-    def __init__(self, params: MirrorParams, context: SearchContext) -> None:
-        self.params = params
-        self.objective = context.objective
-        self.filled: set[tuple[int, int, int]] = set()
-        self.attempts: dict[tuple[int, int, int], int] = {}
-        self.queue: list[tuple[tuple[int, int, int], Plan]] = []
-
-    def observe(self, plans: list[Plan], results: list[EpisodeResult], moving: float) -> None:
-        """Hear what any arm played (the mirror's own episodes included)."""
-        for plan, result in zip(plans, results, strict=False):
-            if not self.objective.hit(result):
-                continue
-            cell = failure_cell(result.summary, moving)
-            self.filled.add(cell)
-            target = mirrored_cell(cell)
-            if target in self.filled or self.attempts.get(target, 0) >= self.params.attempts:
-                continue
-            self.attempts[target] = self.attempts.get(target, 0) + 1
-            mirrored = plan.space.mirrored(plan.decisions)
-            self.queue.append((target, Plan(plan.space, mirrored)))
-
-    def ask(self) -> list[Plan]:
-        waiting = [(cell, plan) for cell, plan in self.queue if cell not in self.filled]
-        self.queue = []
-        return [plan for _, plan in waiting]
-
-    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
-        pass
-
-    def record(self) -> dict[str, Any]:
-        return {"cells_seen": len(self.filled)}
-
-
 METHODS: dict[str, type[SearchParams]] = {
     "mirror": MirrorParams,
     "uniform": UniformParams,
@@ -376,8 +280,12 @@ class PortfolioSampler:
         except Exception as error:  # a user's sampler may raise anything
             self._drop(state, error)
         for other in self.arms:
-            if isinstance(other.sampler, MirrorSampler):
-                other.sampler.observe(plans, results, self.classifier.moving_speed)
+            if other is state or other.dropped or not isinstance(other.sampler, Observer):
+                continue
+            try:
+                other.sampler.observe(plans, results)
+            except Exception as error:  # a user's sampler may raise anything
+                self._drop(other, error)
 
     def _gain(self, state: _ArmState, result: EpisodeResult, episode: int) -> float:
         """What ``episode``, played by ``state``'s arm, found that no arm had."""

@@ -1,20 +1,26 @@
-"""The study's baseline: uniform random actions that do not walk the human into a wall.
+"""Uniform random sampling: the study's closed-loop baseline, and open-loop sequences.
 
-Each decision draws actions uniformly from the action space until one keeps the human clear of
-every static obstacle over the next decision period (its straight-or-arc path checked at the
-physics step); if none of ``attempts`` draws does, the human turns on the spot at a random rate.
+The study's baseline (:class:`RandomTester`) draws each decision's action uniformly from the
+action space until one keeps the human clear of every static obstacle over the next decision
+period (its straight-or-arc path checked at the physics step); if none of ``attempts`` draws
+does, the human turns on the spot at a random rate. :class:`UniformSampler` draws whole
+episodes' decisions uniformly, an arm of the default portfolio.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
-from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.testers.base import EpisodeRecorder, check_parameters, is_whole_number
 from hazardhunt.testers.clear_path import human_path
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.search import SearchContext, SpaceParams
 
 
 class RandomTester:
@@ -58,3 +64,32 @@ class RandomTester:
         """Nothing is learned; the directory records the sampler's settings."""
         directory.mkdir(parents=True, exist_ok=True)
         (directory / "random.txt").write_text(f"seed={self.seed}\nattempts={self.attempts}\n")
+
+
+class UniformParams(SpaceParams):
+    """Uniform random sampling's settings."""
+
+    batch_size: int = Field(default=10, ge=1, le=10_000)
+    """Episodes per batch."""
+
+
+class UniformSampler:
+    """Every number of every decision uniform in [-1, 1], the decision spaces in turn."""
+
+    def __init__(self, params: UniformParams, context: SearchContext) -> None:
+        self.params = params
+        self.rng = np.random.default_rng(context.seed)
+        self.horizon = context.horizon
+        self.batches = 0
+
+    def ask(self) -> list[Plan]:
+        spaces = self.params.space.decision_spaces
+        space = spaces[self.batches % len(spaces)]
+        shape = (self.params.batch_size, self.horizon, space.size)
+        return [Plan(space, decisions) for decisions in self.rng.uniform(-1.0, 1.0, shape)]
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        self.batches += 1
+
+    def record(self) -> dict[str, Any]:
+        return {}

@@ -49,6 +49,16 @@ class Sampler(Protocol):
         ...
 
 
+@runtime_checkable
+class Observer(Protocol):
+    """A sampler that also learns from episodes it did not ask for (in a portfolio, those of
+    the other arms). Optional: a sampler without :meth:`observe` learns only from its own."""
+
+    def observe(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        """What episodes another sampler asked for did."""
+        ...
+
+
 RENAMED = {
     "population": "batch_size",
     "initial_std": "initial_spread",
