@@ -76,3 +76,60 @@ def test_an_arm_of_ones_own_that_does_not_load_is_a_clear_error(tmp_path, monkey
     arms = [{"name": "mine", "method": "no_such_module:Search"}]
     with pytest.raises(ValueError, match="arm 'mine': 'no_such_module:Search': cannot import"):
         make_tester("portfolio", 0, {"arms": arms})
+
+
+OBSERVING_SAMPLER = """
+import numpy as np
+
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.search import SearchTester, SpaceParams
+
+
+class StandStill:
+    def __init__(self, params, context):
+        self.space, self.horizon, self.heard = params.space.decision_spaces[0], context.horizon, 0
+
+    def ask(self):
+        return [Plan(self.space, np.full((self.horizon, self.space.size), -1.0))]
+
+    def tell(self, plans, results):
+        pass
+
+    def observe(self, plans, results):
+        self.heard += len(results)
+
+    def record(self):
+        return {"heard": self.heard}
+
+
+class StandStillSearch(SearchTester):
+    name = "stand-still"
+    params_model = SpaceParams
+
+    def make_sampler(self, context):
+        return StandStill(self.params, context)
+"""
+
+
+def test_an_arm_of_ones_own_with_observe_hears_the_other_arms_episodes(tmp_path, monkeypatch):
+    (tmp_path / "my_observer.py").write_text(OBSERVING_SAMPLER)
+    monkeypatch.chdir(tmp_path)
+    arms = [
+        {"name": "still", "method": "my_observer:StandStillSearch"},
+        {"name": "uniform", "method": "uniform", "params": {"batch_size": 3}},
+    ]
+    config = RunConfig(
+        scenario="crossing",
+        field="none",
+        tester="portfolio",
+        tester_params={"arms": arms},
+        seed=0,
+        episodes=12,
+        controller=PluginSpec(path="hazardhunt.sut.pursuit:PursuitController"),
+    )
+    assert record_run(config, tmp_path / "run")["episodes"] == 12
+    played = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())
+    still, uniform = played["arms_played"]["still"], played["arms_played"]["uniform"]
+    assert still["episodes"] > 0
+    assert uniform["episodes"] > 0
+    assert still["heard"] == uniform["episodes"]  # every episode the other arm played, only those

@@ -55,7 +55,7 @@ class Observer(Protocol):
     the other arms). Optional: a sampler without :meth:`observe` learns only from its own."""
 
     def observe(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
-        """What episodes another sampler asked for did."""
+        """What the first ``len(results)`` of the plans another sampler asked for did."""
         ...
 
 
