@@ -74,8 +74,13 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
         "### Runtime (Table II)",
         "",
+        "Wall times of runs that shared the machine with other work are not comparable; the "
+        "simulated hours are, whatever the machine did.",
+        "",
         _or_none(
-            tables.runtime_table(runs), "ppo-acc and ppo-max on the same case", wall_times=True
+            tables.runtime_table(runs, results.episodes),
+            "ppo-acc and ppo-max on the same case",
+            wall_times=True,
         ),
         "",
         "### Lesson 1: RL against random sampling",

@@ -244,3 +244,22 @@ def test_failures_per_class_counts_each_testers_failures_of_each_class():
     table = tables.failures_per_class(failures).set_index("class")
     assert table.loc["left/moving", "ppo-max"] == 2
     assert table.loc["front/moving", "random"] == 0
+
+
+def test_runtime_table_gives_the_simulated_hours_that_no_machine_load_biases():
+    run_table = runs(
+        [
+            ("crossing", "1.25m", "ppo-acc", 0, 0, 200.0),
+            ("crossing", "1.25m", "ppo-max", 0, 0, 900.0),  # slower only because the machine was
+        ]
+    )
+    episodes = pd.DataFrame(
+        {
+            "run_id": [run_table["run_id"][0]] * 2 + [run_table["run_id"][1]] * 2,
+            "sim_time": [3600.0, 3600.0, 1800.0, 1800.0],
+        }
+    )
+    row = tables.runtime_table(run_table, episodes).iloc[0]
+    assert row["speedup"] < 0
+    assert (row["ppo-acc simulated (h)"], row["ppo-max simulated (h)"]) == (2.0, 1.0)
+    assert row["simulated speedup"] == pytest.approx(0.5)

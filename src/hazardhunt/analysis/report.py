@@ -247,9 +247,10 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
         "Runtime: accumulated vs maximum reward (Table II)",
         f"Mean wall time per run; the speedup of {STUDY_REWARDS[1]} is 1 - max / acc as in the "
         "study. "
-        "'per 20k' scales the measured time per episode to the study's 20,000 episodes.",
+        "'per 20k' scales the measured time per episode to the study's 20,000 episodes; the "
+        "simulated hours per run, unlike wall times, do not depend on what else the machine ran.",
         "runtime",
-        lambda results, _: tables.runtime_table(results.runs),
+        lambda results, _: tables.runtime_table(results.runs, results.episodes),
     ),
 )
 """Sections that are one table each: title, explanation, table name, how to compute it (from

@@ -112,16 +112,21 @@ def failures_per_class(failures: pd.DataFrame) -> pd.DataFrame:
     return counts.reset_index().rename_axis(columns=None)
 
 
-def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
+def runtime_table(runs: pd.DataFrame, episodes: pd.DataFrame | None = None) -> pd.DataFrame:
     """Table II: mean wall time per run of the accumulated-reward and the maximum-reward tester
     (``STUDY_REWARDS``: ppo-acc and ppo-max) and the speedup.
 
     The speedup is the study's: 1 - max / acc. Beside the measured means are the same runs
-    scaled to the study's 20,000 episodes, and the study's own runtimes.
+    scaled to the study's 20,000 episodes, and the study's own runtimes. With the runs'
+    ``episodes``, also the mean simulated hours per run and the speedup they give, which no
+    load on the machine can bias (wall times of runs that shared a machine are not comparable).
     """
     acc, most = STUDY_REWARDS
     rows = []
     rl = runs[runs["tester"].isin([acc, most])]
+    simulated = None
+    if episodes is not None and not episodes.empty:
+        simulated = episodes.groupby("run_id")["sim_time"].sum() / 3600.0
     for (scenario, field), group in rl.groupby(["scenario", "field"], sort=True):
         means = group.groupby("tester")["wall_time_s"].mean()
         per_episode = (group["wall_time_s"] / group["episodes"]).groupby(group["tester"]).mean()
@@ -137,6 +142,13 @@ def runtime_table(runs: pd.DataFrame) -> pd.DataFrame:
             f"{acc} per 20k (h:mm)": hours_minutes(per_episode[acc] * STUDY_EPISODES),
             f"{most} per 20k (h:mm)": hours_minutes(per_episode[most] * STUDY_EPISODES),
         }
+        if simulated is not None:
+            hours = simulated.reindex(group["run_id"]).groupby(group["tester"].to_numpy()).mean()
+            row |= {
+                f"{acc} simulated (h)": hours[acc],
+                f"{most} simulated (h)": hours[most],
+                "simulated speedup": 1.0 - hours[most] / hours[acc],
+            }
         if study:
             row |= {
                 f"study {acc} (h:mm)": hours_minutes(study[acc] * 60.0),
