@@ -125,7 +125,7 @@ def runtime_table(runs: pd.DataFrame, episodes: pd.DataFrame | None = None) -> p
     rows = []
     rl = runs[runs["tester"].isin([acc, most])]
     simulated = None
-    if episodes is not None and not episodes.empty:
+    if episodes is not None and {"run_id", "sim_time"} <= set(episodes.columns):
         simulated = episodes.groupby("run_id")["sim_time"].sum() / 3600.0
     for (scenario, field), group in rl.groupby(["scenario", "field"], sort=True):
         means = group.groupby("tester")["wall_time_s"].mean()
