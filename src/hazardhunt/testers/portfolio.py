@@ -24,7 +24,7 @@ How the budget moves:
 - an episode's gain is 1 for a failure of a class no arm has found before (the built-in
   taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`), 0.3 for one in a
   new cell of the failure descriptors (sector of the robot, safety-layer history, human moving
-  or standing), and 0.1 for any other failure;
+  or standing), and 0.03 for any other failure;
 - each arm's value is its gain per episode, discounted so that what it found lately counts
   most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
   next batch goes to the arm of highest value;
@@ -83,7 +83,7 @@ NEW_CLASS_GAIN = 1.0
 """An episode's gain for a failure of a class no arm has found."""
 NEW_CELL_GAIN = 0.3
 """An episode's gain for a failure in a descriptor cell no arm has filled."""
-FAILURE_GAIN = 0.1
+FAILURE_GAIN = 0.03
 """An episode's gain for any other failure."""
 METHODS: dict[str, type[SearchParams]] = {
     "mirror": MirrorParams,
