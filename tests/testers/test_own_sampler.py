@@ -57,18 +57,23 @@ def test_the_documented_sampler_joins_the_portfolio_as_an_arm(tmp_path, monkeypa
         {"name": "grid", "method": "my_testers:GridSearch", "params": {"speeds": 3}},
         {"name": "uniform", "method": "uniform", "params": {"batch_size": 2}},
     ]
+    assert portfolio_arms_played(tmp_path / "run", arms, episodes=6)["grid"]["episodes"] > 0
+
+
+def portfolio_arms_played(directory, arms, episodes):
+    """Run a portfolio of ``arms`` against the pursuit controller for ``episodes``; what each
+    arm played and recorded (``tester/portfolio.json``)."""
     config = RunConfig(
         scenario="crossing",
         field="none",
         tester="portfolio",
         tester_params={"arms": arms},
         seed=0,
-        episodes=6,
+        episodes=episodes,
         controller=PluginSpec(path="hazardhunt.sut.pursuit:PursuitController"),
     )
-    assert record_run(config, tmp_path / "run")["episodes"] == 6
-    record = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())
-    assert record["arms_played"]["grid"]["episodes"] > 0
+    assert record_run(config, directory)["episodes"] == episodes
+    return json.loads((directory / "tester" / "portfolio.json").read_text())["arms_played"]
 
 
 def test_an_arm_of_ones_own_that_does_not_load_is_a_clear_error(tmp_path, monkeypatch):
@@ -118,18 +123,8 @@ def test_an_arm_of_ones_own_with_observe_hears_the_other_arms_episodes(tmp_path,
         {"name": "still", "method": "my_observer:StandStillSearch"},
         {"name": "uniform", "method": "uniform", "params": {"batch_size": 3}},
     ]
-    config = RunConfig(
-        scenario="crossing",
-        field="none",
-        tester="portfolio",
-        tester_params={"arms": arms},
-        seed=0,
-        episodes=12,
-        controller=PluginSpec(path="hazardhunt.sut.pursuit:PursuitController"),
-    )
-    assert record_run(config, tmp_path / "run")["episodes"] == 12
-    played = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())
-    still, uniform = played["arms_played"]["still"], played["arms_played"]["uniform"]
+    played = portfolio_arms_played(tmp_path / "run", arms, episodes=12)
+    still, uniform = played["still"], played["uniform"]
     assert still["episodes"] > 0
     assert uniform["episodes"] > 0
     assert still["heard"] == uniform["episodes"]  # every episode the other arm played, only those
