@@ -96,6 +96,11 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
             {"arms": [{"name": "a", "method": "cem", "params": {"batch_size": 1}}]},
             "arms: arm 'a': batch_size: must be greater than or equal to 2, not 1",
         ),
+        (
+            "portfolio",
+            {"arms": [{"name": "b", "method": "boundary", "params": {"steps": 0}}]},
+            "arms: arm 'b': steps: must be greater than or equal to 1, not 0",
+        ),
     ],
 )
 def test_bad_search_parameters_are_clear_errors(tester, params, message):

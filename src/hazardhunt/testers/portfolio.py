@@ -15,7 +15,10 @@ score). Its default arms (:data:`DEFAULT_ARMS`):
 - ``qd-mixed``: quality-diversity search over every decision space, one emitter each;
 - ``random``: uniform random sampling of open-loop actions that keep off walls and shelves;
 - ``mirror``: for a failure any arm found, the same episode mirrored left for right, while the
-  robot's other side has no failure of its kind: one episode per side checked.
+  robot's other side has no failure of its kind: one episode per side checked;
+- ``boundary``: for a failure any arm found, bisection towards a nearby episode that did not
+  fail (:mod:`hazardhunt.testers.boundary`): where a failure region ends its mechanism often
+  changes first (a human the field saw too late rather than never).
 
 How the budget moves:
 
@@ -30,7 +33,8 @@ How the budget moves:
   next batch goes to the arm of highest value;
 - every arm keeps at least ``floor`` / (number of arms) of the episodes played, so that a
   search that finds its first failure late (behind a protective field) gets to find it; the
-  mirror, which has something to propose only after a failure, is asked first when it has.
+  mirror and the boundary propose nothing before the first failure, and the mirror, which
+  plays few episodes, is asked first whenever it has one to play.
 
 Searching on a requirement (``hazardhunt run --search-on NAME``), a violation counts as a
 failure does here, its class the requirement's name and the signals that explain it
@@ -38,11 +42,11 @@ failure does here, its class the requirement's name and the signals that explain
 
 The failures found count as known for every arm: the cross-entropy arms score a failure by its
 distance from all failures the portfolio has, so each arm is pushed away from what the others
-found. An arm with ``observe`` (:class:`~hazardhunt.testers.search.Observer`; the mirror)
-hears every batch the others play. An arm that raises is dropped, with a warning in the run's
-record, and the others share its budget. The run records which arm played each episode
-(``tester/arms.csv``), what each arm found (``tester/portfolio.json``) and the
-quality-diversity arm's archive (``tester/archive.parquet``).
+found. An arm with ``observe`` (:class:`~hazardhunt.testers.search.Observer`; the mirror
+and the boundary) hears every batch the others play. An arm that raises is dropped, with a
+warning in the run's record, and the others share its budget. The run records which arm
+played each episode (``tester/arms.csv``), what each arm found (``tester/portfolio.json``)
+and the quality-diversity arm's archive (``tester/archive.parquet``).
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ from hazardhunt.sim.simulation import EpisodeResult
 from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester, TesterParameterError
+from hazardhunt.testers.boundary import BoundaryParams, BoundarySampler
 from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
 from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.mirror import MirrorParams, MirrorSampler, failure_cell
@@ -87,6 +92,7 @@ FAILURE_GAIN = 0.03
 """An episode's gain for any other failure."""
 METHODS: dict[str, type[SearchParams]] = {
     "mirror": MirrorParams,
+    "boundary": BoundaryParams,
     "uniform": UniformParams,
     "cem": CrossEntropyParams,
     "qd": QualityDiversityParams,
@@ -102,9 +108,9 @@ class Arm(BaseModel):
     name: str = Field(min_length=1)
     """How the run's record names the arm."""
     method: str
-    """``cem``, ``qd``, ``uniform``, ``mirror``, or a sampler of one's own: the import path
-    (``package.module:Class``) of a :class:`~hazardhunt.testers.search.SearchTester`, called
-    as ``Class(seed=..., **params)``, whose ``make_sampler`` makes the arm's sampler."""
+    """``cem``, ``qd``, ``uniform``, ``mirror``, ``boundary``, or a sampler of one's own: the
+    import path (``package.module:Class``) of a :class:`~hazardhunt.testers.search.SearchTester`,
+    called as ``Class(seed=..., **params)``, whose ``make_sampler`` makes the arm's sampler."""
     params: dict[str, Any] = {}
     """The sampler's settings (those of ``hazardhunt run --tester METHOD``, but ``workers``,
     which the portfolio sets)."""
@@ -134,6 +140,7 @@ DEFAULT_ARMS = (
     ),
     Arm(name="random", method="uniform", params={"space": {"kind": "open", "detour": True}}),
     Arm(name="mirror", method="mirror"),
+    Arm(name="boundary", method="boundary"),
 )
 """The arms of the default portfolio: the configurations that were each the best on some kind
 of system under test (docs/search-methods.md)."""
@@ -327,11 +334,11 @@ class PortfolioSampler:
 def _looks(arm: Arm) -> int:
     """The batches of an arm's first look: one per decision space it searches in turn (one for
     quality-diversity, whose every batch spans them, after its plain attacks; none for the
-    mirror, which waits for failures)."""
+    mirror and the boundary, which wait for failures)."""
     if arm.method not in METHODS:
         return 1
     params = parse_params(arm.name, METHODS[arm.method], arm.params)
-    if isinstance(params, MirrorParams):
+    if isinstance(params, MirrorParams | BoundaryParams):
         return 0
     if isinstance(params, QualityDiversityParams):  # each batch spans every space
         attacks = params.space.plain_attacks
@@ -374,6 +381,8 @@ def _sampler(arm: Arm, context: SearchContext, known: FailureArchive) -> Sampler
         return QualityDiversitySampler(params, context)
     if isinstance(params, MirrorParams):
         return MirrorSampler(params, context)
+    if isinstance(params, BoundaryParams):
+        return BoundarySampler(params, context)
     assert isinstance(params, UniformParams)
     return UniformSampler(params, context)
 

@@ -1,0 +1,164 @@
+"""The boundary: from a failure, bisection towards a nearby episode that did not fail.
+
+Where a failure region ends, its mechanism often changes before the failures stop: a human who
+walks into the robot's unguarded side just where the field would see them is a different
+failure (seen too late, hit while the robot brakes) from one the field never saw, and both lie
+next to the episodes in which the field stopped the robot in time. Such a mechanism fills a
+thin band that random draws and a search pulled towards the bulk of the failures rarely land
+in: with the built-in NMPC behind the 1.25 m field, a human cutting in over the field's edge
+(``edge-entry/moving``) came up once in a thousand episodes of a search aimed at the robot,
+and about once in forty episodes on bisection lines from the side failures of a run
+(docs/search-methods.md, "Following failures to their border").
+
+The boundary sampler plays, for a failure any sampler found, the episode's own actions
+perturbed a little until one perturbation does not fail, then bisects between the two: each
+midpoint that fails becomes the new failure end, each that does not the new far end, so that
+the episodes close in on the border from both sides. A line starts from a failure of the
+descriptor cell with the fewest lines so far (the sector of the robot it met the human in, the
+safety layer's history, the human moving or standing:
+:func:`~hazardhunt.testers.mirror.failure_cell`; no taxonomy is needed): one the other
+samplers found, or one of its own that was the first in its cell (the rest lie on lines
+already followed). It works on the actions the episodes played, read in the open decision
+space, so it bisects between episodes of any sampler. It is an arm of the default portfolio
+(:mod:`hazardhunt.testers.portfolio`) and proposes nothing until some arm finds a failure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from hazardhunt.sim.simulation import EpisodeResult
+from hazardhunt.spec.failure_classes import MechanismClassifier
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.mirror import failure_cell
+from hazardhunt.testers.search import SearchContext, SearchParams
+from hazardhunt.testers.spaces import DecisionSpace
+
+Cell = tuple[int, int, int]
+
+OPEN = DecisionSpace("open")
+"""The actions as played: every episode replays in it exactly."""
+
+
+class BoundaryParams(SearchParams):
+    """The boundary sampler's settings."""
+
+    batch_size: int = Field(default=4, ge=1, le=1000)
+    """Bisection lines followed at once (one episode each per batch)."""
+    spread: float = Field(default=0.1, gt=0.0, le=2.0, allow_inf_nan=False)
+    """Standard deviation of the perturbation that looks for a nearby episode that does not
+    fail (actions are in [-1, 1])."""
+    tries: int = Field(default=10, ge=1, le=1000)
+    """Perturbations a line tries before it gives up on its failure."""
+    steps: int = Field(default=8, ge=1, le=50)
+    """Bisection steps per line."""
+
+
+@dataclass
+class _Line:
+    """One bisection line: from a failure (``inside``) towards an episode that did not fail
+    (``outside``, None while it is being looked for)."""
+
+    cell: Cell
+    inside: NDArray[np.float64]
+    outside: NDArray[np.float64] | None = None
+    tries: int = 0
+    steps: int = 0
+    pending: NDArray[np.float64] | None = None
+    """The actions of the episode asked for and not yet told."""
+
+
+class BoundarySampler:
+    """Bisects between the failures any arm found and nearby episodes that do not fail
+    (module docstring)."""
+
+    def __init__(self, params: BoundaryParams, context: SearchContext) -> None:
+        self.params = params
+        self.objective = context.objective
+        self.horizon = context.horizon
+        robot = context.simulation.robot_params
+        self.moving_speed = MechanismClassifier(robot=robot).moving_speed
+        self.rng = np.random.default_rng(context.seed)
+        self.failures: dict[Cell, list[NDArray[np.float64]]] = {}
+        """The failures heard of, by cell, as actions padded to the horizon."""
+        self.lines_started: dict[Cell, int] = {}
+        self.lines: list[_Line] = []
+        self.lines_done = 0
+
+    def observe(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        """Hear what another arm played."""
+        self._remember(results, own=False)
+
+    def _remember(self, results: list[EpisodeResult], own: bool) -> None:
+        """Keep the failures as starts of lines: all the others found, and of its own only
+        those that were the first in their cell (the rest lie on lines already followed)."""
+        for result in results:
+            if not self.objective.hit(result) or not len(result.actions):
+                continue
+            cell = failure_cell(result.summary, self.moving_speed)
+            if own and cell in self.failures:
+                continue
+            self.failures.setdefault(cell, []).append(self._padded(result.actions))
+
+    def ask(self) -> list[Plan]:
+        while len(self.lines) < self.params.batch_size and self.failures:
+            cell = min(self.failures, key=lambda c: self.lines_started.get(c, 0))
+            found = self.failures[cell]
+            start = found[int(self.rng.integers(len(found)))]
+            self.lines_started[cell] = self.lines_started.get(cell, 0) + 1
+            self.lines.append(_Line(cell, start))
+        for line in self.lines:
+            line.pending = self._next(line)
+        return [Plan(OPEN, line.pending) for line in self.lines if line.pending is not None]
+
+    def tell(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
+        asked = [line for line in self.lines if line.pending is not None]
+        for line, result in zip(asked, results, strict=False):
+            played = line.pending
+            assert played is not None
+            line.pending = None
+            failed = self.objective.hit(result)
+            if line.outside is None:
+                line.tries += 1
+                if not failed:
+                    line.outside = played
+            elif failed:
+                line.inside, line.steps = played, line.steps + 1
+            else:
+                line.outside, line.steps = played, line.steps + 1
+        for line in asked[len(results) :]:
+            line.pending = None
+        kept = [line for line in self.lines if not self._finished(line)]
+        self.lines_done += len(self.lines) - len(kept)
+        self.lines = kept
+        self._remember(results, own=True)
+
+    def record(self) -> dict[str, Any]:
+        return {"lines_done": self.lines_done, "cells_seen": len(self.failures)}
+
+    def _next(self, line: _Line) -> NDArray[np.float64]:
+        """The actions of a line's next episode: a perturbation of its failure while it looks
+        for a far end, the midpoint of its two ends after."""
+        if line.outside is None:
+            noise = self.rng.normal(0.0, self.params.spread, line.inside.shape)
+            return np.clip(line.inside + noise, -1.0, 1.0)
+        return 0.5 * (line.inside + line.outside)
+
+    def _finished(self, line: _Line) -> bool:
+        if line.outside is None:
+            return line.tries >= self.params.tries
+        return line.steps >= self.params.steps
+
+    def _padded(self, actions: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
+        """A failure's actions, its last one held to the end of the horizon (the failure
+        replays as it was; an episode near it that does not end there goes on walking)."""
+        played = np.asarray(actions, dtype=np.float64).reshape(-1, 2)
+        if len(played) >= self.horizon:
+            return played[: self.horizon].copy()
+        rest = np.repeat(played[-1:], self.horizon - len(played), axis=0)
+        return np.concatenate([played, rest])

@@ -1,0 +1,61 @@
+"""The boundary arm: bisection from a failure towards a nearby episode that did not fail."""
+
+import numpy as np
+import pytest
+
+from hazardhunt.sim.simulation import Simulation
+from hazardhunt.sut.pursuit import PursuitController
+from hazardhunt.testers.boundary import BoundaryParams, BoundarySampler
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.search import SearchContext
+from hazardhunt.testers.spaces import DecisionSpace
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return Simulation.build("head-on", "none", controller=PursuitController())
+
+
+def play(sim, plans):
+    return [plan.space.play(sim, plan.decisions, False) for plan in plans]
+
+
+def test_the_boundary_waits_for_a_failure_then_closes_in_on_where_failing_stops(sim):
+    sampler = BoundarySampler(BoundaryParams(batch_size=1, steps=6), SearchContext(sim, seed=3))
+    assert sampler.ask() == []  # nothing to start from
+    attack = Plan(DecisionSpace("aim"), np.tile([1.0, 0.5, -1.0], (sim.horizon, 1)))
+    [failure] = play(sim, [attack])
+    assert failure.outcome == "failure"
+    sampler.observe([attack], [failure])
+
+    played = []
+    while sampler.lines_done == 0:
+        plans = sampler.ask()
+        results = play(sim, plans)
+        sampler.tell(plans, results)
+        failed = [result.outcome == "failure" for result in results]
+        played += [(plan.decisions, fail) for plan, fail in zip(plans, failed, strict=True)]
+        assert len(played) < 30, "the line never ended"
+    # Perturbations of the failure until one does not fail, then six midpoints.
+    first_safe = next(i for i, (_, failed) in enumerate(played) if not failed)
+    assert len(played) == first_safe + 1 + 6
+    inside = np.asarray(failure.actions, dtype=np.float64)
+    inside = np.concatenate([inside, np.repeat(inside[-1:], sim.horizon - len(inside), axis=0)])
+    outside = played[first_safe][0]
+    gap = np.abs(inside - outside).max()
+    for decisions, failed in played[first_safe + 1 :]:
+        np.testing.assert_allclose(decisions, 0.5 * (inside + outside))
+        inside, outside = (decisions, outside) if failed else (inside, decisions)
+    # The last failure and the last safe episode are 1/64 as far apart as the first pair.
+    assert np.abs(inside - outside).max() == pytest.approx(gap / 2**6)
+
+
+def test_the_boundary_starts_its_lines_in_the_least_explored_cell_first(sim):
+    sampler = BoundarySampler(BoundaryParams(batch_size=2), SearchContext(sim, seed=0))
+    left = Plan(DecisionSpace("aim"), np.tile([1.0, 0.5, -1.0], (sim.horizon, 1)))
+    right = Plan(DecisionSpace("aim"), np.tile([1.0, -0.5, -1.0], (sim.horizon, 1)))
+    results = play(sim, [left, left, right])
+    assert all(result.outcome == "failure" for result in results)
+    sampler.observe([left, left, right], results)
+    assert len(sampler.ask()) == 2
+    assert sorted(line.cell for line in sampler.lines) == sorted(sampler.failures)
