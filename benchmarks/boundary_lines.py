@@ -54,6 +54,8 @@ def main() -> None:
     played = 0
     while sampler.lines_done < args.lines:
         plans = sampler.ask()
+        if not plans:
+            raise SystemExit(f"{args.run}: none of its failures fails when replayed here")
         results = play(plans)
         sampler.tell(plans, results)
         played += len(results)
