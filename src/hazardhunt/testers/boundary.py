@@ -7,7 +7,7 @@ next to the episodes in which the field stopped the robot in time. Such a mechan
 thin band that random draws and a search pulled towards the bulk of the failures rarely land
 in: with the built-in NMPC behind the 1.25 m field, a human cutting in over the field's edge
 (``edge-entry/moving``) came up once in a thousand episodes of a search aimed at the robot,
-and about once in fifty episodes on bisection lines from the failures of a run
+and 6 times in 275 episodes on bisection lines from the failures of a run
 (docs/search-methods.md, "Following failures to their border").
 
 The boundary sampler plays, for a failure any sampler found, the episode's own actions
