@@ -95,6 +95,25 @@ def test_a_slice_run_in_a_new_campaign_directory_adds_to_the_copy(
     assert len(load_results(copy).runs) == 2
 
 
+def test_a_copy_made_by_an_earlier_version_takes_the_runs_of_the_same_campaign(
+    campaign: Path, tmp_path: Path
+) -> None:
+    # An earlier version wrote campaign.json without the settings added since.
+    mine = tmp_path / "campaign"
+    shutil.copytree(campaign, mine)
+    copy = tmp_path / "kept"
+    assert hazardhunt("copy", mine, "--out", copy).returncode == 0
+    stored = json.loads((copy / "campaign.json").read_text())
+    for added in ("sut_error_limit", "requirements", "search_on"):
+        del stored[added]
+    (copy / "campaign.json").write_text(json.dumps(stored))
+    rest = hazardhunt("campaign", campaign.parent / "campaign.toml", "--out", mine)
+    assert rest.returncode == 0, rest.stderr
+    again = hazardhunt("copy", mine, "--out", copy)
+    assert again.returncode == 0, again.stderr
+    assert "1 run(s) copied, 1 already there, 0 not finished yet" in again.stdout
+
+
 def test_a_file_missing_from_a_copy_is_still_damage(campaign: Path, tmp_path: Path) -> None:
     copy = tmp_path / "kept"
     assert hazardhunt("copy", campaign, "--out", copy).returncode == 0
@@ -121,6 +140,14 @@ def test_a_copy_into_other_results_or_into_the_source_is_refused(
     refused = hazardhunt("copy", campaign, "--out", other)
     assert refused.returncode == 2
     assert refused.stderr.strip() == f"error: {other}: holds the copy of another campaign"
+    crossing = json.loads((campaign / "campaign.json").read_text()) | {"scenarios": ["crossing"]}
+    (other / "campaign.json").write_text(json.dumps(crossing))
+    refused = hazardhunt("copy", campaign, "--out", other)
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == (
+        f"error: {other}: holds the copy of another campaign "
+        "(scenarios: there ['crossing'], here ['overtaking'])"
+    )
     [run, *_] = sorted((campaign / "runs").iterdir())
     (tmp_path / "mine" / "notes.txt").parent.mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep me")

@@ -15,7 +15,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hazardhunt.campaign.config import CampaignConfig, ConfigError
+from pydantic import ValidationError
+
+from hazardhunt.campaign.config import CampaignConfig, ConfigError, first_difference
 from hazardhunt.campaign.records import campaign_totals
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
@@ -75,8 +77,17 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
     config = CampaignConfig.model_validate_json(config_text)
     theirs = destination / "campaign.json"
     if theirs.is_file():
-        if json.loads(theirs.read_text()) != json.loads(config_text):
-            raise ConfigError(f"{destination}: holds the copy of another campaign")
+        # Read through the model: a copy made by an earlier version lacks the settings added
+        # since, which take their defaults, and is the same campaign.
+        try:
+            stored = CampaignConfig.model_validate_json(theirs.read_bytes())
+        except ValidationError:
+            raise ConfigError(f"{destination}: holds the copy of another campaign") from None
+        if stored != config:
+            raise ConfigError(
+                f"{destination}: holds the copy of another campaign "
+                f"({first_difference(stored, config)})"
+            )
     elif destination.exists() and any(destination.iterdir()):
         raise ConfigError(f"{destination}: exists and holds something else than this campaign")
     (destination / "runs").mkdir(parents=True, exist_ok=True)
