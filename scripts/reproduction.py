@@ -1,9 +1,10 @@
 """Write the full-budget part of docs/reproduction.md from the study's committed results.
 
-The study's grid (``campaigns/study.toml``, and ``campaigns/study-search.toml`` for the
-searchers beyond the study's testers) runs in slices; after each, ``hazardhunt copy`` keeps
-the finished runs without trajectories under ``benchmarks/results/study/`` (and
-``study-search/``). This script reads them together and rewrites the part of the document
+The study's grid (``campaigns/study.toml``; ``campaigns/study-search.toml`` for the searchers
+beyond the study's testers, and ``campaigns/study-portfolio.toml`` for hazardhunt's default
+tester) runs in slices; after each, ``hazardhunt copy`` keeps the finished runs without
+trajectories under ``benchmarks/results/study/`` (and ``study-search/``,
+``study-portfolio/``). This script reads them together and rewrites the part of the document
 between its two markers (appended at the end the first time) with how much of the grid is
 done and, over the runs done, the study's figure and tables beside ours: failures per run,
 Table I, Table II, Lessons 1, 2 and 3, and the learning curves as failures per 500 episodes
@@ -47,8 +48,10 @@ def section(results: Results, images: Path, doc: Path) -> str:
     hours = float(runs["wall_time_s"].sum()) / 3600.0
     study = runs["tester"].isin(STUDY_TESTERS)
     others = sorted(set(runs.loc[~study, "tester"]))
+    beside = int((~study).sum())
     beyond = (
-        f" Beside them, {int((~study).sum())} runs of {', '.join(others)} on the same grid."
+        f" Beside them, {beside} {'run' if beside == 1 else 'runs'} of {', '.join(others)} on "
+        "the same grid."
         if others
         else ""
     )
@@ -191,7 +194,11 @@ def main() -> None:
         "--results",
         type=Path,
         nargs="+",
-        default=[Path("benchmarks/results/study"), Path("benchmarks/results/study-search")],
+        default=[
+            Path("benchmarks/results/study"),
+            Path("benchmarks/results/study-search"),
+            Path("benchmarks/results/study-portfolio"),
+        ],
     )
     parser.add_argument("--doc", type=Path, default=Path("docs/reproduction.md"))
     parser.add_argument("--images", type=Path, default=Path("docs/images/study"))

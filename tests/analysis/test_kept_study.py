@@ -13,6 +13,7 @@ from hazardhunt.campaign.store import find_damage
 
 ROOT = Path(__file__).parents[2]
 KEPT = ROOT / "benchmarks" / "results" / "study"
+BESIDE = [ROOT / "benchmarks" / "results" / name for name in ("study-search", "study-portfolio")]
 DOC = ROOT / "docs" / "reproduction.md"
 BEGIN = "<!-- full-budget results: written by scripts/reproduction.py; edits here are lost -->"
 END = "<!-- end of the full-budget results -->"
@@ -24,7 +25,8 @@ def generated(text: str) -> str:
 
 @pytest.mark.skipif(not KEPT.is_dir(), reason="no kept study results")
 def test_every_kept_study_run_matches_its_checksums():
-    runs = sorted(p for p in (KEPT / "runs").iterdir() if p.is_dir())
+    kept = [KEPT, *(directory for directory in BESIDE if directory.is_dir())]
+    runs = sorted(p for directory in kept for p in (directory / "runs").iterdir() if p.is_dir())
     assert runs
     assert {run.name: find_damage(run) for run in runs} == {run.name: None for run in runs}
 

@@ -16,6 +16,7 @@ CAMPAIGNS = Path(__file__).parents[2] / "campaigns"
         ("reduced.toml", 81, 300, {"random", "ppo-acc", "ppo-max"}),
         ("study.toml", 81, 20_000, {"random", "ppo-acc", "ppo-max"}),
         ("study-search.toml", 81, 20_000, {"cem", "qd", "ppo-novelty"}),
+        ("study-portfolio.toml", 9, 20_000, {"portfolio"}),
     ],
 )
 def test_a_shipped_campaign_file_loads_with_its_grid(name, runs, episodes, testers):
@@ -29,6 +30,7 @@ def test_every_shipped_campaign_file_is_tested():
     assert sorted(p.name for p in CAMPAIGNS.glob("*.toml")) == [
         "quick.toml",
         "reduced.toml",
+        "study-portfolio.toml",
         "study-search.toml",
         "study.toml",
     ]
