@@ -93,6 +93,7 @@ def test_class_coverage_counts_distinct_named_classes_over_seeds_not_other():
     results = Results(None, run_table, empty, failures, empty)  # type: ignore[arg-type]
     row = tables.class_coverage(results).iloc[0]
     assert row["k / K"] == "2 / 10"
+    assert row["per seed"] == "1 / 1"
     assert row["study k / K"] == "5 / 9"
     assert row["classes"] == "side-left/no-stop, side-right/no-stop, other"
 

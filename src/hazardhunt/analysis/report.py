@@ -215,7 +215,8 @@ TableSource = Callable[[Results, dict[str, pd.DataFrame]], pd.DataFrame]
 TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
     (
         "Failure classes found (Table I)",
-        "Distinct failure classes found over all seeds, k / K, beside the study's own numbers. "
+        "Distinct failure classes found over all seeds, k / K, and by each seed, beside the "
+        "study's own numbers. "
         "K counts the named classes of the taxonomy (docs/failure-classes.md): 10 with a field "
         "and 8 without, where the study counted 9 and 8; failures no class fits are listed as "
         "'other' and not counted in k.",

@@ -34,7 +34,8 @@ def failures_per_run(runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def class_coverage(results: Results) -> pd.DataFrame:
-    """Table I: the distinct classes found over all seeds, ``k / K``, beside the study's.
+    """Table I: the distinct classes found over all seeds, ``k / K``, beside the study's, and
+    how many each seed found (``per seed``, in the seeds' order: ``5 / 4``).
 
     ``other`` is listed but not counted in k; K is the number of named classes (as the runs
     recorded it when the results' classifier is not known).
@@ -55,6 +56,10 @@ def class_coverage(results: Results) -> pd.DataFrame:
         else:
             total = len(classes) - 1
         study = STUDY_CLASSES.get((scenario, field), {}).get(tester)
+        named = failures.loc[mask & (failures["class"] != OTHER)] if found else failures.iloc[:0]
+        per_seed = [
+            named.loc[named["seed"] == seed, "class"].nunique() for seed in sorted(runs["seed"])
+        ]
         rows.append(
             {
                 "scenario": scenario,
@@ -63,6 +68,7 @@ def class_coverage(results: Results) -> pd.DataFrame:
                 "found": len(found - {OTHER}),
                 "total": total,
                 "k / K": f"{len(found - {OTHER})} / {total}",
+                "per seed": " / ".join(str(count) for count in per_seed),
                 "study k / K": f"{study[0]} / {study[1]}" if study else "",
                 "classes": ", ".join(name for name in classes if name in found),
             }
