@@ -28,7 +28,6 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from pydantic import ValidationError
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import (
@@ -41,7 +40,13 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import CampaignConfig, ConfigError, RunConfig, first_difference
+from hazardhunt.campaign.config import (
+    CampaignConfig,
+    ConfigError,
+    RunConfig,
+    first_difference,
+    read_stored_campaign,
+)
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
 from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, execute_locally
 from hazardhunt.campaign.lock import exclusive_lock
@@ -209,12 +214,9 @@ def _check_directory(config: CampaignConfig, out: Path) -> None:
     if stored_file.is_file():
         if not _holds_complete_runs(out):
             return
-        try:
-            stored = CampaignConfig.model_validate_json(stored_file.read_bytes())
-        except (OSError, ValidationError):
-            raise ConfigError(
-                f"{stored_file}: not a campaign configuration; use another --out"
-            ) from None
+        stored = read_stored_campaign(stored_file)
+        if stored is None:
+            raise ConfigError(f"{stored_file}: not a campaign configuration; use another --out")
         if stored != config:
             raise ConfigError(
                 f"{out}: holds a different campaign ({first_difference(stored, config)}); "

@@ -657,6 +657,17 @@ def _tester_plugins(
     return plugins
 
 
+def read_stored_campaign(path: Path) -> CampaignConfig | None:
+    """The campaign configuration a results directory keeps in ``path`` (its
+    ``campaign.json``), or None if that file cannot be read as one. It is read through the
+    model, so a file written by an earlier version, which lacks the settings added since,
+    takes their defaults and compares equal to the same campaign written today."""
+    try:
+        return CampaignConfig.model_validate_json(path.read_bytes())
+    except (OSError, ValidationError):
+        return None
+
+
 def first_difference(stored: BaseModel, given: BaseModel) -> str:
     """The first setting in which two configurations of one kind differ, as ``key: there X,
     here Y`` (``stored`` is there, ``given`` here)."""

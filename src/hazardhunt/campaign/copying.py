@@ -15,9 +15,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
-
-from hazardhunt.campaign.config import CampaignConfig, ConfigError, first_difference
+from hazardhunt.campaign.config import (
+    CampaignConfig,
+    ConfigError,
+    first_difference,
+    read_stored_campaign,
+)
 from hazardhunt.campaign.records import campaign_totals
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
@@ -77,12 +80,9 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
     config = CampaignConfig.model_validate_json(config_text)
     theirs = destination / "campaign.json"
     if theirs.is_file():
-        # Read through the model: a copy made by an earlier version lacks the settings added
-        # since, which take their defaults, and is the same campaign.
-        try:
-            stored = CampaignConfig.model_validate_json(theirs.read_bytes())
-        except ValidationError:
-            raise ConfigError(f"{destination}: holds the copy of another campaign") from None
+        stored = read_stored_campaign(theirs)
+        if stored is None:
+            raise ConfigError(f"{destination}: holds the copy of another campaign")
         if stored != config:
             raise ConfigError(
                 f"{destination}: holds the copy of another campaign "
