@@ -86,7 +86,7 @@ def section(results: Results, images: Path, doc: Path) -> str:
             wall_times=True,
         ),
         "",
-        "### Lesson 1: RL against random sampling",
+        "### Lesson 1: each tester against random sampling",
         "",
         _or_none(tables.lesson_1(runs), "random and PPO runs with the same seed"),
         "",

@@ -276,7 +276,7 @@ def test_a_table_the_campaign_cannot_fill_says_which_testers_it_needs(campaign, 
     }
     runtime = said["Runtime: accumulated vs maximum reward (Table II)"]
     assert "It needs ppo-acc and ppo-max on the same (scenario, field)" in runtime
-    lesson_1 = said["Lesson 1: does RL find more failures than random sampling?"]
+    lesson_1 = said["Lesson 1: does a tester find more failures than random sampling?"]
     assert "It needs random and another tester with the same (scenario, field, seed)" in lesson_1
 
 

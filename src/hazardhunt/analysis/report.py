@@ -225,7 +225,7 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
     ),
     (
         "Lesson 2: diversity against random sampling",
-        "In how many (scenario, field) cases each RL tester found more, as many or fewer "
+        "In how many (scenario, field) cases each tester found more, as many or fewer "
         "distinct classes than random sampling, and how often each tester found each class "
         "(the study: RL found more failures per class, with about as many classes).",
         "lesson_2",
@@ -238,9 +238,9 @@ TABLE_SECTIONS: tuple[tuple[str, str, str, TableSource], ...] = (
         lambda results, _: tables.failures_per_class(results.failures),
     ),
     (
-        "Lesson 1: does RL find more failures than random sampling?",
-        "For every (scenario, field, seed) that both testers ran, whether the RL tester found "
-        "more failures than random sampling with the same seed.",
+        "Lesson 1: does a tester find more failures than random sampling?",
+        "For every (scenario, field, seed) that both testers ran, whether the tester found "
+        "more failures than random sampling with the same seed (the study asked it of RL).",
         "lesson_1",
         lambda results, _: tables.lesson_1(results.runs),
     ),
