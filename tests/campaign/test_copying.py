@@ -160,6 +160,18 @@ def test_a_copy_into_other_results_or_into_the_source_is_refused(
     assert "inside the results it would copy" in inside.stderr
 
 
+def test_a_campaign_whose_configuration_is_damaged_is_refused_by_name(tmp_path: Path) -> None:
+    damaged = tmp_path / "received"
+    (damaged / "runs").mkdir(parents=True)
+    (damaged / "campaign.json").write_text('{"scenarios": 3}')
+    refused = hazardhunt("copy", damaged, "--out", tmp_path / "kept")
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == (
+        f"error: {damaged / 'campaign.json'}: not a campaign configuration"
+    )
+    assert not (tmp_path / "kept").exists()
+
+
 def test_a_single_run_copies_and_copies_again_as_already_there(
     campaign: Path, tmp_path: Path
 ) -> None:

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from hazardhunt.campaign.config import (
-    CampaignConfig,
     ConfigError,
     first_difference,
     read_stored_campaign,
@@ -76,8 +75,9 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
 
 
 def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) -> Copied:
-    config_text = (source / "campaign.json").read_text()
-    config = CampaignConfig.model_validate_json(config_text)
+    config = read_stored_campaign(source / "campaign.json")
+    if config is None:
+        raise ConfigError(f"{source / 'campaign.json'}: not a campaign configuration")
     theirs = destination / "campaign.json"
     if theirs.is_file():
         stored = read_stored_campaign(theirs)
@@ -100,7 +100,9 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
             copied.damaged[run.run_id] = damage
         else:
             _copy_if_new(path, destination / "runs" / run.run_id, leave_out, copied)
-    write_json_atomic(destination / "campaign.json", json.loads(config_text))
+    write_json_atomic(
+        destination / "campaign.json", json.loads((source / "campaign.json").read_text())
+    )
     if (source / "summary.json").is_file():
         summary = json.loads((source / "summary.json").read_text())
         kept = destination / "summary.json"
