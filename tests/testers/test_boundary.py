@@ -59,3 +59,45 @@ def test_the_boundary_starts_its_lines_in_the_least_explored_cell_first(sim):
     sampler.observe([left, left, right], results)
     assert len(sampler.ask()) == 2
     assert sorted(line.cell for line in sampler.lines) == sorted(sampler.failures)
+
+
+def test_with_saved_ends_every_second_line_bisects_towards_an_episode_the_field_saved():
+    sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
+    failing = Plan(DecisionSpace("aim"), np.tile([1.0, 0.6, -1.0], (sim.horizon, 1)))
+    saved = Plan(DecisionSpace("aim"), np.tile([1.0, 0.5, -1.0], (sim.horizon, 1)))
+    results = play(sim, [failing, saved])
+    assert [result.outcome for result in results] == ["failure", "safe_contact"]
+    assert results[1].summary.emergency_stops > 0  # the field stopped the robot in time
+    params = BoundaryParams(batch_size=2, saved_ends=True)
+    sampler = BoundarySampler(params, SearchContext(sim, seed=0))
+    sampler.observe([failing, saved], results)
+
+    first, second = sampler.ask()
+    pad = sampler._padded
+    inside, outside = pad(results[0].actions), pad(results[1].actions)
+    assert not np.allclose(first.decisions, 0.5 * (inside + outside))  # a perturbation
+    np.testing.assert_allclose(second.decisions, 0.5 * (inside + outside))  # a midpoint
+
+
+def test_saved_ends_change_nothing_where_no_safety_layer_ever_stops_the_robot(sim):
+    attack = Plan(DecisionSpace("aim"), np.tile([1.0, 0.5, -1.0], (sim.horizon, 1)))
+    near = Plan(DecisionSpace("aim"), np.tile([1.0, 0.4, -1.0], (sim.horizon, 1)))
+    results = play(sim, [attack, near])
+    assert results[0].outcome == "failure"
+    assert all(result.summary.emergency_stops == 0 for result in results)  # no field
+
+    def lines(saved_ends):
+        sampler = BoundarySampler(
+            BoundaryParams(batch_size=2, saved_ends=saved_ends), SearchContext(sim, seed=5)
+        )
+        sampler.observe([attack, near], results)
+        asked = []
+        for _ in range(6):
+            plans = sampler.ask()
+            sampler.tell(plans, play(sim, plans))
+            asked += [plan.decisions for plan in plans]
+        return asked
+
+    assert len(lines(False)) >= 12
+    for with_ends, without in zip(lines(True), lines(False), strict=True):
+        np.testing.assert_array_equal(with_ends, without)

@@ -21,6 +21,12 @@ samplers found, or one of its own that was the first in its cell (the rest lie o
 already followed). It works on the actions the episodes played, read in the open decision
 space, so it bisects between episodes of any sampler. It is an arm of the default portfolio
 (:mod:`hazardhunt.testers.portfolio`) and proposes nothing until some arm finds a failure.
+
+With ``saved_ends``, every second line skips the perturbations: its far end is the episode
+nearest its failure (in the actions played) in which the safety layer stopped the robot and
+nothing failed, one any sampler played. Between a failure the safety layer never saw and an
+episode it saved lies the band where it saw the human too late; a system under test without a
+safety layer that stops the robot has no such episode, and every line perturbs as before.
 """
 
 from __future__ import annotations
@@ -57,6 +63,9 @@ class BoundaryParams(SearchParams):
     """Perturbations a line tries before it gives up on its failure."""
     steps: int = Field(default=8, ge=1, le=50)
     """Bisection steps per line."""
+    saved_ends: bool = False
+    """Every second line bisects towards the nearest episode the safety layer saved (an
+    emergency stop, no failure) instead of a perturbation of its failure, once there is one."""
 
 
 @dataclass
@@ -89,6 +98,9 @@ class BoundarySampler:
         self.lines_started: dict[Cell, int] = {}
         self.lines: list[_Line] = []
         self.lines_done = 0
+        self.lines_begun = 0
+        self.saved: list[NDArray[np.float64]] = []
+        """With ``saved_ends``: the episodes heard of that the safety layer saved, padded."""
 
     def observe(self, plans: list[Plan], results: list[EpisodeResult]) -> None:
         """Hear what another arm played."""
@@ -96,9 +108,14 @@ class BoundarySampler:
 
     def _remember(self, results: list[EpisodeResult], own: bool) -> None:
         """Keep the failures as starts of lines: all the others found, and of its own only
-        those that were the first in their cell (the rest lie on lines already followed)."""
+        those that were the first in their cell (the rest lie on lines already followed); with
+        ``saved_ends``, every episode the safety layer saved as a far end."""
         for result in results:
-            if not self.objective.hit(result) or not len(result.actions):
+            if not len(result.actions):
+                continue
+            if not self.objective.hit(result):
+                if self.params.saved_ends and result.summary.emergency_stops > 0:
+                    self.saved.append(self._padded(result.actions))
                 continue
             cell = failure_cell(result.summary, self.moving_speed)
             if own and cell in self.failures:
@@ -111,7 +128,8 @@ class BoundarySampler:
             found = self.failures[cell]
             start = found[int(self.rng.integers(len(found)))]
             self.lines_started[cell] = self.lines_started.get(cell, 0) + 1
-            self.lines.append(_Line(cell, start))
+            self.lines_begun += 1
+            self.lines.append(_Line(cell, start, outside=self._saved_end(start)))
         for line in self.lines:
             line.pending = self._next(line)
         return [Plan(OPEN, line.pending) for line in self.lines if line.pending is not None]
@@ -148,6 +166,14 @@ class BoundarySampler:
             noise = self.rng.normal(0.0, self.params.spread, line.inside.shape)
             return np.clip(line.inside + noise, -1.0, 1.0)
         return 0.5 * (line.inside + line.outside)
+
+    def _saved_end(self, start: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """The far end of a line begun at ``start``: for every second line with
+        ``saved_ends``, the saved episode nearest it; None (look for one) otherwise."""
+        if not self.saved or self.lines_begun % 2:
+            return None
+        distances = [float(np.sum((saved - start) ** 2)) for saved in self.saved]
+        return self.saved[int(np.argmin(distances))]
 
     def _finished(self, line: _Line) -> bool:
         if line.outside is None:
