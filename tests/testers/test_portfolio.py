@@ -13,8 +13,10 @@ from hazardhunt.campaign.run import record_run
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.pursuit import PursuitController
 from hazardhunt.testers.cem import CrossEntropySampler
+from hazardhunt.testers.evaluator import Plan
 from hazardhunt.testers.mirror import MirrorSampler
-from hazardhunt.testers.portfolio import DEFAULT_ARMS
+from hazardhunt.testers.portfolio import DEFAULT_ARMS, Arm, PortfolioParams, PortfolioSampler
+from hazardhunt.testers.search import SearchContext
 from hazardhunt.testers.spaces import DecisionSpace
 
 
@@ -131,3 +133,56 @@ def test_an_arm_that_raises_while_hearing_the_others_is_dropped(tmp_path, monkey
     assert arms["mirror"]["dropped"] == "ZeroDivisionError: the arm's own bug"
     assert arms["mirror"]["episodes"] == 0
     assert all(arms[name]["dropped"] is None for name in arms if name != "mirror")
+
+
+@pytest.fixture(scope="module")
+def approaches():
+    """Episodes on crossing / 1.25 m that come ever closer to the robot, and one that fails."""
+    sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
+
+    def episode(space, decision):
+        plan = Plan(DecisionSpace(space), np.tile(decision, (sim.horizon, 1)))
+        return plan.space.play(sim, plan.decisions, False)
+
+    stand = episode("open", [-1.0, 0.0])  # the human stays where it starts, 4.5 m off
+    three_metres = episode("aim", [1.0, 0.5, 1.0])  # keeps 3 m, then 1.5 m, from the robot
+    metre_and_half = episode("aim", [1.0, 0.5, 0.0])
+    failure = episode("aim", [1.0, 0.6, -1.0])  # into its side
+    assert all(result.outcome == "goal" for result in (stand, three_metres, metre_and_half))
+    assert stand.summary.max_risk < three_metres.summary.max_risk < metre_and_half.summary.max_risk
+    assert failure.outcome == "failure"
+    return sim, stand, three_metres, metre_and_half, failure
+
+
+def uniform_arms(*names):
+    return [Arm(name=name, method="uniform", params={"batch_size": 2}) for name in names]
+
+
+@pytest.mark.parametrize("closer_gain", [0.1, 0.0])
+def test_before_any_failure_the_budget_goes_to_the_arm_that_came_closer(approaches, closer_gain):
+    sim, stand, three_metres, metre_and_half, _ = approaches
+    params = PortfolioParams(arms=uniform_arms("far", "near"), closer_gain=closer_gain)
+    sampler = PortfolioSampler(params, SearchContext(sim, seed=0))
+    sampler.tell(sampler.ask(), [stand, stand])  # the first look of each arm, in order
+    sampler.tell(sampler.ask(), [three_metres, metre_and_half])
+    sampler.tell(sampler.ask(), [stand, stand])
+    chosen = "near" if closer_gain else "far"  # without the gain a tie: the first in order
+    assert sampler.episode_arms == ["far", "far", "near", "near", chosen, chosen]
+
+
+def test_from_the_first_failure_on_coming_closer_counts_for_nothing(approaches):
+    sim, stand, three_metres, metre_and_half, failure = approaches
+
+    def values(closer_gain):
+        params = PortfolioParams(arms=uniform_arms("far", "near", "hit"), closer_gain=closer_gain)
+        sampler = PortfolioSampler(params, SearchContext(sim, seed=0))
+        sampler.tell(sampler.ask(), [stand, stand])  # the first looks, in order
+        sampler.tell(sampler.ask(), [three_metres, metre_and_half])
+        before = [state.value(6.0, params.optimism) for state in sampler.arms]
+        sampler.tell(sampler.ask(), [failure, stand])
+        after = [state.value(6.0, params.optimism) for state in sampler.arms]
+        return before, after
+
+    with_gain, without = values(0.1), values(0.0)
+    assert with_gain[0] != without[0]  # the gains for coming closer counted
+    assert with_gain[1] == without[1]  # and were forgotten at the failure, to the last bit

@@ -27,7 +27,9 @@ How the budget moves:
 - an episode's gain is 1 for a failure of a class no arm has found before (the built-in
   taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`), 0.3 for one in a
   new cell of the failure descriptors (sector of the robot, safety-layer history, human moving
-  or standing), and 0.03 for any other failure;
+  or standing), and 0.03 for any other failure; until the run's first failure, ``closer_gain``
+  for an episode that came closer to one than every episode before it (the objective's score),
+  gains forgotten at the first failure;
 - each arm's value is its gain per episode, discounted so that what it found lately counts
   most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
   next batch goes to the arm of highest value;
@@ -157,6 +159,10 @@ class PortfolioParams(SearchParams):
     """Weight of an arm's earlier batches against its latest, per batch the portfolio plays."""
     optimism: float = Field(default=0.02, ge=0.0, allow_inf_nan=False)
     """Scale of the bonus for arms tried less (in gain per episode)."""
+    closer_gain: float = Field(default=0.1, ge=0.0, le=1.0, allow_inf_nan=False)
+    """Before the run's first failure, an episode's gain for coming closer to one (the search
+    objective's score: the largest risk, or the requirement's robustness) than every episode
+    before it (0: the budget moves only on what the failures found)."""
 
     @field_validator("arms", mode="before")
     @classmethod
@@ -195,6 +201,8 @@ class _ArmState:
     classes: dict[str, int] = field(default_factory=dict)
     """The classes this arm found first, with the episode it found each in."""
     weighted_gain: float = 0.0
+    weighted_closer: float = 0.0
+    """Gain for coming closer to a failure, earned before the run's first; 0 from then on."""
     weighted_episodes: float = 0.0
     dropped: str | None = None
     """Why the arm was taken out of the portfolio (it raised), if it was."""
@@ -206,7 +214,7 @@ class _ArmState:
     def value(self, total: float, optimism: float) -> float:
         if self.weighted_episodes <= 0.0:
             return math.inf
-        mean = self.weighted_gain / self.weighted_episodes
+        mean = (self.weighted_gain + self.weighted_closer) / self.weighted_episodes
         return mean + optimism * math.sqrt(max(math.log(total), 0.0) / self.weighted_episodes)
 
 
@@ -226,6 +234,7 @@ class PortfolioSampler:
         self.classes_found: set[str] = set()
         self.cells_found: set[tuple[int, ...]] = set()
         self.episode_arms: list[str] = []
+        self.closest = -math.inf
         self._asking: _ArmState | None = None
 
     def ask(self) -> list[Plan]:
@@ -275,8 +284,14 @@ class PortfolioSampler:
         gain = sum(self._gain(state, result, first + i) for i, result in enumerate(results))
         for other in self.arms:
             other.weighted_gain *= self.params.discount
+            other.weighted_closer *= self.params.discount
             other.weighted_episodes *= self.params.discount
         state.weighted_gain += gain
+        if self.classes_found:  # failures found: from now on only they move the budget
+            for other in self.arms:
+                other.weighted_closer = 0.0
+        else:
+            state.weighted_closer += self.params.closer_gain * self._closer(results)
         state.weighted_episodes += len(results)
         state.episodes += len(results)
         state.batches += 1
@@ -315,6 +330,17 @@ class PortfolioSampler:
             self.cells_found.add(cell)
             gain = max(gain, NEW_CELL_GAIN)
         return gain
+
+    def _closer(self, results: list[EpisodeResult]) -> int:
+        """How many of ``results``, in order, came closer to a failure than every episode
+        before them (the objective's score)."""
+        closer = 0
+        for result in results:
+            score = self.objective.score(result)
+            if score > self.closest:
+                self.closest = score
+                closer += 1
+        return closer
 
     def record(self) -> dict[str, Any]:
         return {
