@@ -281,17 +281,18 @@ class PortfolioSampler:
         state = self._asking
         assert state is not None, "tell() before ask()"
         first = len(self.episode_arms)
+        failed_before = bool(self.classes_found)
         gain = sum(self._gain(state, result, first + i) for i, result in enumerate(results))
         for other in self.arms:
             other.weighted_gain *= self.params.discount
             other.weighted_closer *= self.params.discount
             other.weighted_episodes *= self.params.discount
         state.weighted_gain += gain
-        if self.classes_found:  # failures found: from now on only they move the budget
+        if not self.classes_found:
+            state.weighted_closer += self.params.closer_gain * self._closer(results)
+        elif not failed_before:  # the first failure: from now on only failures move the budget
             for other in self.arms:
                 other.weighted_closer = 0.0
-        else:
-            state.weighted_closer += self.params.closer_gain * self._closer(results)
         state.weighted_episodes += len(results)
         state.episodes += len(results)
         state.batches += 1
