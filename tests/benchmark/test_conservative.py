@@ -24,6 +24,7 @@ from hazardhunt.benchmark.held_out import (
     HELD_OUT_MUTANTS,
     AbsorbedIntoStaticMap,
     CreepsAfterWaiting,
+    HurriesAfterDelay,
 )
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
@@ -164,6 +165,27 @@ def wait_beside_route_then_step_into_side() -> Policy:
     return lie_in_wait((10.0, 9.1), NORTH, robot_past(10.1), attack)
 
 
+def hold_up_then_walk_into_side() -> Policy:
+    """HurriesAfterDelay: stand in the robot's way until it has stood 3 s, step aside 2 m south
+    of the route and ahead, and walk straight into its side as it comes by at its catch-up
+    speed."""
+    standing = 0.0
+    attack: Policy = lambda sim: keep_heading(sim, NORTH, 1.5)  # noqa: E731
+    step_aside = lie_in_wait((11.0, 7.7), NORTH, robot_past(10.2), attack)
+
+    def policy(sim: Simulation) -> tuple[float, float]:
+        nonlocal standing
+        if standing >= 3.0:
+            return step_aside(sim)
+        standing += sim.decision_period if sim.robot.speed == 0.0 else 0.0
+        x, y, _ = sim.human_pose
+        if math.hypot(x - 10.0, y - 10.0) > 0.01:
+            return walk_to(sim, (10.0, 10.0))
+        return keep_heading(sim, -NORTH, 0.0)
+
+    return policy
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -174,6 +196,7 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     IgnoresHumanWalkingAlongside: ("overtaking", walk_alongside_then_cut_in),
     CreepsAfterWaiting: ("crossing", wait_beside_route_then_step_into_side),
     AbsorbedIntoStaticMap: ("crossing", wait_beside_route_then_step_into_side),
+    HurriesAfterDelay: ("crossing", hold_up_then_walk_into_side),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 

@@ -137,8 +137,55 @@ class AbsorbedIntoStaticMap(ConservativeController):
         return super().human_threatens(time, robot, human)
 
 
+class HurriesAfterDelay(ConservativeController):
+    """Mutant: once it has stood ``delay`` seconds for a human in all, the robot makes up the
+    lost time at ``catch_up_speed``, with the stop distance still reckoned for its cruise speed
+    (a schedule catch-up).
+
+    The bug: a fleet manager that holds robots to a timetable lets a delayed robot drive at its
+    top speed until it is back on time; the stop distance was computed once, for the cruise
+    speed, and nobody recomputed it for the faster one. At 1.2 m/s a human coming at the
+    robot's side needs 2.5 m of it (:meth:`ConservativeController.stop_budget` without the
+    robot's own travel), and it keeps 1.76. Exposed by a human who holds the robot up, steps
+    aside, and walks into its side once it has sped up.
+    """
+
+    def __init__(self, delay: float = 2.0, catch_up_speed: float = 1.2, **options: float) -> None:
+        """Args:
+        delay: How long the robot must have stood for a human before it hurries, in s.
+        catch_up_speed: Its speed while it makes up the time, in m/s.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.delay = delay
+        self.catch_up_speed = catch_up_speed
+        self._stood = 0.0
+        self._last_time: float | None = None
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._stood = 0.0
+        self._last_time = None
+
+    def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
+        command = super().control(time, robot, human)
+        elapsed = 0.0 if self._last_time is None else time - self._last_time
+        self._last_time = time
+        if command.status in ("stopped for human", "stopped: human not seen"):
+            self._stood += elapsed
+            return command
+        if self._stood >= self.delay and command.speed > 0.0:
+            remaining = self.remaining_route
+            speed = min(self.catch_up_speed, self.robot.max_speed, 2.0 * remaining)
+            limit = self.robot.max_yaw_rate
+            yaw_rate = float(np.clip(command.yaw_rate * speed / command.speed, -limit, limit))
+            return ControlCommand(speed=speed, yaw_rate=yaw_rate, status="catching up")
+        return command
+
+
 HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     CreepsAfterWaiting,
     AbsorbedIntoStaticMap,
+    HurriesAfterDelay,
 )
 """The held-out mutants, one planted bug each."""
