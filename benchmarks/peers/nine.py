@@ -3,9 +3,11 @@
 Per case and method: distinct failure classes found (``other`` not counted) and failures, for
 one seed; then the targets of the episode-level testers against the study's testers: whether
 the best of ``--new`` finds at least as many classes as ``random`` and as ``ppo-max`` in every
-case, strictly more in how many, and the union of every method's classes in how many. Later
-files win where two give the same (case, method, seed). Prints Markdown; needs only the
-standard library.
+case, strictly more in how many, and the union of every method's classes in how many. With
+``--default``, the same two counts for that method against every other one, and, for each other
+method measured in every case, against all the rest but the default: how often any single
+method leads. Later files win where two give the same (case, method, seed). Prints Markdown;
+needs only the standard library.
 
     python benchmarks/peers/nine.py benchmarks/results/peers.json \\
         benchmarks/results/peers_nine_*.json --seed 0
@@ -93,6 +95,7 @@ def main() -> None:
     print(f"- the union of all methods' classes: {union_reached} of {complete}")
     if args.default:
         print_default(rows, cases, args.default)
+        print_leaders(rows, cases, args.default)
 
 
 def print_default(rows: dict[tuple[str, str], dict[str, Any]], cases: list[str], name: str) -> None:
@@ -124,6 +127,35 @@ def print_default(rows: dict[tuple[str, str], dict[str, Any]], cases: list[str],
     print()
     print(f"- at least as many classes as every other method: {as_many} of {complete}")
     print(f"- every method's classes together: {union_reached} of {complete}")
+
+
+def leads(
+    rows: dict[tuple[str, str], dict[str, Any]], case: str, method: str, left_out: set[str]
+) -> tuple[bool, bool]:
+    """Whether ``method`` found at least as many classes in ``case`` as every other method
+    measured there but ``left_out``, and every class that they all found together."""
+    own = classes(rows[(case, method)])
+    others = [
+        classes(r) for (c, m), r in rows.items() if c == case and m not in {method, *left_out}
+    ]
+    union = set(own).union(*others)
+    return all(len(own) >= len(o) for o in others), own == union
+
+
+def print_leaders(rows: dict[tuple[str, str], dict[str, Any]], cases: list[str], name: str) -> None:
+    """For ``name`` and each method measured in every case: in how many cases it finds at least
+    as many classes as every other method measured there but ``name``, and all of their
+    classes together. A target asked of one method is hard in proportion to how often any
+    method meets it."""
+    methods = sorted({m for _, m in rows if all((c, m) in rows for c in cases)} - {name})
+    print()
+    print(f"Each method against every other one but `{name}`, over the {len(cases)} cases:")
+    print()
+    print("| method | >= every other method | union |")
+    print("|---|---|---|")
+    for method in [name, *methods] if all((c, name) in rows for c in cases) else methods:
+        verdicts = [leads(rows, case, method, {name}) for case in cases]
+        print(f"| `{method}` | {sum(v[0] for v in verdicts)} | {sum(v[1] for v in verdicts)} |")
 
 
 if __name__ == "__main__":
