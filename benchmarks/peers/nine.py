@@ -116,8 +116,7 @@ def print_default(rows: dict[tuple[str, str], dict[str, Any]], cases: list[str],
         union = set(own).union(*others.values())
         best = max(others, key=lambda m: len(others[m]), default=None)
         best_count = len(others[best]) if best else 0
-        enough = len(own) >= best_count
-        complete_union = own == union
+        enough, complete_union = leads(rows, case, name, set())
         as_many += enough
         union_reached += complete_union
         print(
