@@ -12,6 +12,8 @@ with one planted bug, and a plug-in::
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from hazardhunt.benchmark.conservative import ConservativeController, estimated_speed
@@ -159,27 +161,27 @@ class HurriesAfterDelay(ConservativeController):
         super().__init__(**options)
         self.delay = delay
         self.catch_up_speed = catch_up_speed
+        self._planned_speed = self.cruise_speed
         self._stood = 0.0
         self._last_time: float | None = None
 
     def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        self.cruise_speed = self._planned_speed  # the stop distance is reckoned for it
         super().reset(floor, route, robot, params)
         self._stood = 0.0
         self._last_time = None
 
     def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
-        command = super().control(time, robot, human)
         elapsed = 0.0 if self._last_time is None else time - self._last_time
         self._last_time = time
+        hurrying = self._stood >= self.delay
+        if hurrying:  # the route is followed faster; the stop distance stays as it was
+            self.cruise_speed = self.catch_up_speed
+        command = super().control(time, robot, human)
         if command.status in ("stopped for human", "stopped: human not seen"):
             self._stood += elapsed
-            return command
-        if self._stood >= self.delay and command.speed > 0.0:
-            remaining = self.remaining_route
-            speed = min(self.catch_up_speed, self.robot.max_speed, 2.0 * remaining)
-            limit = self.robot.max_yaw_rate
-            yaw_rate = float(np.clip(command.yaw_rate * speed / command.speed, -limit, limit))
-            return ControlCommand(speed=speed, yaw_rate=yaw_rate, status="catching up")
+        elif hurrying and command.speed > 0.0:
+            return dataclasses.replace(command, status="catching up")
         return command
 
 
