@@ -68,6 +68,7 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
         markdown_table(tables.failures_per_run(runs)),
         "",
+        *failures_chart(runs, images, doc),
     ]
     coverage = tables.class_coverage(results)
     lines += [
@@ -90,6 +91,7 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
         _or_none(tables.lesson_1(runs), "random and PPO runs with the same seed"),
         "",
+        *lesson_1_by_case(runs),
         "### Lesson 2: classes against random sampling, failures per class",
         "",
         _or_none(tables.lesson_2(coverage), "random and PPO runs on the same case"),
@@ -118,6 +120,44 @@ def section(results: Results, images: Path, doc: Path) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def failures_chart(runs: pd.DataFrame, images: Path, doc: Path) -> list[str]:
+    """The study's bar chart: failures per run, mean and spread over the seeds, on a log scale
+    (the runs' counts span two orders of magnitude)."""
+    picture = figures.failures_bar_chart(runs, images / "failures_per_run.png", log=True)
+    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    return [
+        "Bars are the mean over the seeds kept, error bars one standard deviation, dots the "
+        "seeds (log scale).",
+        "",
+        f"![Failures per run]({link})",
+        "",
+    ]
+
+
+def lesson_1_by_case(runs: pd.DataFrame) -> list[str]:
+    """Lesson 1 case by case, with each case's verdict over its seeds and how many hold in
+    every seed."""
+    table = tables.lesson_1_by_case(runs)
+    if table.empty:
+        return []
+    held = [
+        f"`{tester}` {int((group['verdict'] == 'ahead').sum())} of {len(group)}"
+        for tester, group in table.groupby("tester", sort=False)
+    ]
+    return [
+        "Case by case: the failures of each seed beside random sampling's with the same seed, "
+        "and the ratio of their failure rates with its exact 95 % interval (the conditional "
+        "test of two Poisson rates: given a pair's failures, the tester's share is binomial; "
+        "it counts every episode as an independent trial, which a tester that learns is not, "
+        "so it says what the counts allow, not more). A case is `ahead` where the interval "
+        "lies above 1 in every seed kept, `behind` where it lies below 1 in every one, `mixed` "
+        f"otherwise. Ahead in every seed kept: {', '.join(held)} cases.",
+        "",
+        markdown_table(table),
+        "",
+    ]
 
 
 def loitering_episode(results: Results, images: Path, doc: Path) -> list[str]:

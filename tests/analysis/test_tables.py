@@ -78,6 +78,45 @@ def test_without_a_random_run_to_compare_with_lesson_1_is_empty():
     assert table.empty
 
 
+def test_a_rate_ratio_interval_is_the_exact_interval_of_the_runs_share_of_the_pairs_failures():
+    ratio, low, high = tables.rate_ratio(30, 1000, 10, 1000)
+    share = beta.ppf([0.025, 0.975], [30, 31], [11, 10])  # Clopper-Pearson of 30 in 40
+    assert ratio == pytest.approx(3.0)
+    assert (low, high) == pytest.approx(tuple(share / (1 - share)))
+    # twice the episodes for the same failures is half the rate
+    assert tables.rate_ratio(30, 2000, 10, 1000)[0] == pytest.approx(1.5)
+    assert tables.rate_ratio(5, 100, 0, 100)[0] == math.inf
+    assert tables.rate_ratio(0, 100, 5, 100)[:2] == (0.0, 0.0)
+    assert math.isnan(tables.rate_ratio(0, 100, 0, 100)[0])
+
+
+def test_lesson_1_by_case_holds_a_verdict_only_when_every_seed_gives_it():
+    table = tables.lesson_1_by_case(
+        runs(
+            [
+                ("crossing", "2m", "random", 0, 3),
+                ("crossing", "2m", "random", 1, 5),
+                ("crossing", "2m", "ppo-max", 0, 40),  # clearly ahead
+                ("crossing", "2m", "ppo-max", 1, 60),  # clearly ahead
+                ("crossing", "2m", "ppo-max", 2, 99),  # no random run with seed 2: not compared
+                ("head-on", "2m", "random", 0, 30),
+                ("head-on", "2m", "random", 1, 30),
+                ("head-on", "2m", "ppo-max", 0, 80),  # ahead
+                ("head-on", "2m", "ppo-max", 1, 31),  # within the noise
+                ("overtaking", "2m", "random", 0, 50),
+                ("overtaking", "2m", "ppo-max", 0, 2),  # behind
+            ]
+        )
+    ).set_index(["scenario", "tester"])
+    crossing = table.loc[("crossing", "ppo-max")]
+    assert crossing["seeds"] == "0 / 1"
+    assert crossing["failures (tester / random)"] == "40 / 3; 60 / 5"
+    assert crossing["verdict"] == "ahead"
+    assert table.loc[("head-on", "ppo-max"), "verdict"] == "mixed"
+    assert table.loc[("overtaking", "ppo-max"), "verdict"] == "behind"
+    assert ("crossing", "random") not in table.index
+
+
 def test_class_coverage_counts_distinct_named_classes_over_seeds_not_other():
     run_table = runs([("crossing", "1.25m", "random", 0, 3), ("crossing", "1.25m", "random", 1, 1)])
     failures = pd.DataFrame(
@@ -264,3 +303,22 @@ def test_runtime_table_gives_the_simulated_hours_that_no_machine_load_biases():
     assert row["speedup"] < 0
     assert (row["ppo-acc simulated (h)"], row["ppo-max simulated (h)"]) == (2.0, 1.0)
     assert row["simulated speedup"] == pytest.approx(0.5)
+
+
+def test_runtime_table_gives_cpu_times_only_where_every_run_recorded_one():
+    recorded = runs(
+        [
+            ("crossing", "1.25m", "ppo-acc", 0, 0, 200.0),
+            ("crossing", "1.25m", "ppo-acc", 1, 0, 300.0),
+            ("crossing", "1.25m", "ppo-max", 0, 0, 900.0),
+            ("head-on", "1.25m", "ppo-acc", 0, 0, 200.0),
+            ("head-on", "1.25m", "ppo-max", 0, 0, 100.0),
+        ]
+    )
+    recorded["cpu_time_s"] = [180.0, 220.0, 100.0, 150.0, math.nan]  # head-on's ppo-max: older
+    table = tables.runtime_table(recorded).set_index("scenario")
+    crossing = table.loc["crossing"]
+    assert (crossing["ppo-acc CPU (s)"], crossing["ppo-max CPU (s)"]) == (200.0, 100.0)
+    assert crossing["CPU speedup"] == pytest.approx(0.5)  # where the wall time says -260 %
+    assert math.isnan(table.loc["head-on", "CPU speedup"])
+    assert "CPU speedup" not in tables.runtime_table(recorded.drop(columns="cpu_time_s"))

@@ -24,6 +24,7 @@ SUMMARY_KEYS = {
     "safe_contacts",
     "stalls",
     "wall_time_s",
+    "cpu_time_s",
     "episodes_per_s",
 }
 
@@ -43,6 +44,7 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     assert set(summary) >= SUMMARY_KEYS
+    assert summary["cpu_time_s"] > 0
     assert (summary["scenario"], summary["field"], summary["tester"]) == ("head-on", "2m", "random")
     assert summary["episodes"] == 4
     episodes = pd.read_parquet(out / "episodes.parquet")
@@ -56,6 +58,15 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
     again = hazardhunt("run", *run_args(out), "--json")
     assert again.returncode == 0
     assert json.loads(again.stdout)["finished_at"] == summary["finished_at"]
+
+
+def test_a_runs_cpu_time_counts_the_processes_it_started_once_they_end():
+    from hazardhunt.campaign.records import cpu_seconds
+
+    before = cpu_seconds()
+    burn = "import time\nend = time.process_time() + 0.5\nwhile time.process_time() < end: pass"
+    subprocess.run([sys.executable, "-c", burn], check=True)
+    assert cpu_seconds() - before >= 0.5
 
 
 @pytest.mark.parametrize(

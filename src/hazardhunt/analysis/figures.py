@@ -35,9 +35,10 @@ def _save(figure: Figure, path: Path) -> Path:
     return path
 
 
-def failures_bar_chart(runs: pd.DataFrame, path: Path) -> Path:
+def failures_bar_chart(runs: pd.DataFrame, path: Path, log: bool = False) -> Path:
     """Mean failures per run by scenario and tester, one panel per field setting; the error bar
-    is the standard deviation over seeds and the dots are the seeds."""
+    is the standard deviation over seeds and the dots are the seeds. With ``log``, on a
+    logarithmic axis (the error bar clipped at the axis' foot)."""
     fields = _ordered_fields(runs["field"])
     scenarios = sorted(runs["scenario"].unique())
     testers = sort_testers(runs["tester"])
@@ -60,20 +61,16 @@ def failures_bar_chart(runs: pd.DataFrame, path: Path) -> Path:
                 means.append(seeds.mean())
                 spreads.append(seeds.std(ddof=1) if len(seeds) > 1 else 0.0)
                 ax.plot([position] * len(seeds), seeds, ".", color="black", markersize=3)
-            ax.bar(
-                positions,
-                means,
-                width,
-                yerr=spreads,
-                capsize=2,
-                color=colour_of(tester),
-                label=tester,
-            )
+            if positions:
+                ax.bar(positions, means, width, yerr=spreads, capsize=2, color=colour_of(tester))
         ax.set_xticks(range(len(scenarios)), scenarios)
         ax.set_title(f"field {field}")
         ax.set_ylabel("failures per run")
-        if column == 0:
-            ax.legend(fontsize=8)
+        if log:
+            ax.set_yscale("log", nonpositive="clip")
+        if column == 0:  # every tester, whether or not this panel has its bars
+            patches = [Rectangle((0, 0), 1, 1, color=colour_of(tester)) for tester in testers]
+            ax.legend(patches, testers, fontsize=8)
     return _save(figure, path)
 
 

@@ -69,6 +69,7 @@ RUN_COLUMNS = (
     "classes_found",
     "classes_total",
     "wall_time_s",
+    "cpu_time_s",
     "episodes_per_s",
 )
 """What ``summary.json`` says about every run (SPEC 8)."""

@@ -6,6 +6,7 @@ the printed table, so that the report can write it as CSV, Markdown and HTML ali
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -125,7 +126,9 @@ def runtime_table(runs: pd.DataFrame, episodes: pd.DataFrame | None = None) -> p
     The speedup is the study's: 1 - max / acc. Beside the measured means are the same runs
     scaled to the study's 20,000 episodes, and the study's own runtimes. With the runs'
     ``episodes``, also the mean simulated hours per run and the speedup they give, which no
-    load on the machine can bias (wall times of runs that shared a machine are not comparable).
+    load on the machine can bias (wall times of runs that shared a machine are not comparable),
+    and, where every run of both testers recorded it (``cpu_time_s``, from version 0.2.0), the
+    mean CPU time per run and the speedup by it.
     """
     acc, most = STUDY_REWARDS
     rows = []
@@ -148,6 +151,14 @@ def runtime_table(runs: pd.DataFrame, episodes: pd.DataFrame | None = None) -> p
             f"{acc} per 20k (h:mm)": hours_minutes(per_episode[acc] * STUDY_EPISODES),
             f"{most} per 20k (h:mm)": hours_minutes(per_episode[most] * STUDY_EPISODES),
         }
+        cpu = group["cpu_time_s"] if "cpu_time_s" in group else pd.Series(np.nan, group.index)
+        if cpu.notna().all():
+            cpu_means = cpu.groupby(group["tester"]).mean()
+            row |= {
+                f"{acc} CPU (s)": cpu_means[acc],
+                f"{most} CPU (s)": cpu_means[most],
+                "CPU speedup": 1.0 - cpu_means[most] / cpu_means[acc],
+            }
         if simulated is not None:
             hours = simulated.reindex(group["run_id"]).groupby(group["tester"].to_numpy()).mean()
             row |= {
@@ -186,6 +197,74 @@ def lesson_1(runs: pd.DataFrame) -> pd.DataFrame:
                 "study": f"{study[0]} of {study[1]}" if study else "",
             }
         )
+    return pd.DataFrame(rows)
+
+
+def rate_ratio(
+    own: int, own_episodes: int, baseline: int, baseline_episodes: int, confidence: float = 0.95
+) -> tuple[float, float, float]:
+    """How many times the baseline's failure rate one run's is, with its exact interval.
+
+    The conditional test of two Poisson rates: given the pair's failures, the first run's share
+    of them is binomial, and the Clopper-Pearson interval of that share, turned into a ratio of
+    rates with the episodes played as the exposures, is the interval. It treats every episode
+    of a run as an independent trial, which a tester that learns as it runs is not; read it as
+    what the counts alone allow. (ratio, low, high); a ratio with nothing to divide by is
+    ``inf``, and without failures on either side the ratio is undefined (nan in (0, inf)).
+    """
+    exposure = own_episodes / baseline_episodes
+    pair = own + baseline
+    if pair == 0:
+        return math.nan, 0.0, math.inf
+    low, high = clopper_pearson(own, pair, confidence)
+
+    def ratio(share: float) -> float:
+        return math.inf if share >= 1.0 else share / (1.0 - share) / exposure
+
+    return ratio(own / pair), ratio(low), ratio(high)
+
+
+def lesson_1_by_case(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
+    """Lesson 1 case by case: for each tester and (scenario, field) it shares a seed with the
+    baseline on, the failures of both per seed, the ratio of their failure rates with its exact
+    interval (:func:`rate_ratio`), and the verdict: ``ahead`` where the interval lies above 1 in
+    every seed compared, ``behind`` where below 1 in every one, ``mixed`` otherwise."""
+    keys = ["scenario", "field", "seed"]
+    counted = ["failures", "episodes"]
+    baseline = runs.loc[runs["tester"] == STUDY_BASELINE, [*keys, *counted]].set_index(keys)
+    baseline.columns = [f"{name}_baseline" for name in counted]
+    rows = []
+    for tester in sort_testers(runs["tester"]):
+        if tester == STUDY_BASELINE:
+            continue
+        own = runs.loc[runs["tester"] == tester, [*keys, *counted]].set_index(keys)
+        paired = own.join(baseline, how="inner").sort_index()
+        for (scenario, field), group in paired.groupby(level=["scenario", "field"], sort=True):
+            seeds, counts, ratios, sides = [], [], [], []
+            for (_, _, seed), row in group.iterrows():
+                value, low, high = rate_ratio(
+                    int(row["failures"]),
+                    int(row["episodes"]),
+                    int(row["failures_baseline"]),
+                    int(row["episodes_baseline"]),
+                    confidence,
+                )
+                seeds.append(str(seed))
+                counts.append(f"{int(row['failures']):,} / {int(row['failures_baseline']):,}")
+                ratios.append(f"{value:.2f} [{low:.2f}, {high:.2f}]")
+                sides.append("ahead" if low > 1.0 else "behind" if high < 1.0 else "neither")
+            verdict = sides[0] if len(set(sides)) == 1 and sides[0] != "neither" else "mixed"
+            rows.append(
+                {
+                    "scenario": scenario,
+                    "field": field,
+                    "tester": tester,
+                    "seeds": " / ".join(seeds),
+                    f"failures (tester / {STUDY_BASELINE})": "; ".join(counts),
+                    f"rate ratio [{confidence:.0%}]": "; ".join(ratios),
+                    "verdict": verdict,
+                }
+            )
     return pd.DataFrame(rows)
 
 

@@ -1,9 +1,20 @@
 """The records a run and a campaign write about themselves (``summary.json``), typed: what
-moves between a run, the executors, the ledger and the commands."""
+moves between a run, the executors, the ledger and the commands; and the CPU clock a run's
+record reads."""
 
 from __future__ import annotations
 
+import resource
+import time
 from typing import Any, TypedDict
+
+
+def cpu_seconds() -> float:
+    """The CPU time, user and system, of this process and of the processes it started and
+    waited for (the workers that played batches on several cores, PPO's environments), in s:
+    a run records the difference over its episodes as ``cpu_time_s``."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
 
 
 class FirstError(TypedDict):
@@ -54,6 +65,10 @@ class RunSummary(TypedDict, total=False):
     classes_total: int
     requirements: dict[str, RequirementCount]
     wall_time_s: float
+    cpu_time_s: float
+    """CPU time of the run (its process and the worker processes it waited for), user and
+    system, in s: unlike the wall time, not lengthened by other work on the machine. Runs of
+    versions before 0.2.0 did not record it."""
     episodes_per_s: float
     started_at: str
     finished_at: str

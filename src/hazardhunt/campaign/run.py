@@ -45,7 +45,7 @@ from hazardhunt.campaign.plugins import (
     make_plugin_tester,
     make_safety_layer,
 )
-from hazardhunt.campaign.records import RunSummary
+from hazardhunt.campaign.records import RunSummary, cpu_seconds
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError, PluginError
@@ -207,7 +207,7 @@ def record_run(
     }
     field, requirements = simulation.field, simulation.requirements
     store = RunStore(directory, replay_keys, classifier, field, requirements=requirements)
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), cpu_seconds()
 
     def on_episode(record: EpisodeRecord) -> None:
         store.add(record)
@@ -230,6 +230,7 @@ def record_run(
     store.close()
     wall_time = time.perf_counter() - clock
     summary = _run_summary(config, store, simulation.field, wall_time, started_at)
+    summary["cpu_time_s"] = cpu_seconds() - cpu
     summary["checksums"] = file_checksums(directory)
     write_json_atomic(directory / "summary.json", summary)
     return summary
