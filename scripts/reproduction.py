@@ -109,7 +109,7 @@ def section(results: Results, images: Path, doc: Path) -> str:
         results.episodes, bins=max(1, math.ceil(budget / CURVE_WIDTH)), per=CURVE_WIDTH
     )
     picture = figures.learning_curves_figure(curves, images / "learning_curves.png")
-    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    link = relative_link(picture, doc)
     lines += [
         "### Learning curves",
         "",
@@ -122,11 +122,16 @@ def section(results: Results, images: Path, doc: Path) -> str:
     return "\n".join(lines)
 
 
+def relative_link(picture: Path, doc: Path) -> str:
+    """``picture`` as the Markdown of ``doc`` links it."""
+    return Path(os.path.relpath(picture, doc.parent)).as_posix()
+
+
 def failures_chart(runs: pd.DataFrame, images: Path, doc: Path) -> list[str]:
     """The study's bar chart: failures per run, mean and spread over the seeds, on a log scale
     (the runs' counts span two orders of magnitude)."""
     picture = figures.failures_bar_chart(runs, images / "failures_per_run.png", log=True)
-    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    link = relative_link(picture, doc)
     return [
         "Bars are the mean over the seeds kept, error bars one standard deviation, dots the "
         "seeds (log scale).",
@@ -179,7 +184,7 @@ def loitering_episode(results: Results, images: Path, doc: Path) -> list[str]:
     simulation, _ = replay_actions(config, typical["actions"])
     times, captions = loitering_frames(simulation)
     picture = plot_frames(images / "loitering.png", simulation, times, captions)
-    link = Path(os.path.relpath(picture, doc.parent)).as_posix()
+    link = relative_link(picture, doc)
     return [
         f"The most typical loitering episode, replayed from its actions ({about}):",
         "",

@@ -151,9 +151,8 @@ def runtime_table(runs: pd.DataFrame, episodes: pd.DataFrame | None = None) -> p
             f"{acc} per 20k (h:mm)": hours_minutes(per_episode[acc] * STUDY_EPISODES),
             f"{most} per 20k (h:mm)": hours_minutes(per_episode[most] * STUDY_EPISODES),
         }
-        cpu = group["cpu_time_s"] if "cpu_time_s" in group else pd.Series(np.nan, group.index)
-        if cpu.notna().all():
-            cpu_means = cpu.groupby(group["tester"]).mean()
+        if "cpu_time_s" in group and group["cpu_time_s"].notna().all():
+            cpu_means = group.groupby("tester")["cpu_time_s"].mean()
             row |= {
                 f"{acc} CPU (s)": cpu_means[acc],
                 f"{most} CPU (s)": cpu_means[most],
@@ -230,15 +229,8 @@ def lesson_1_by_case(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFra
     interval (:func:`rate_ratio`), and the verdict: ``ahead`` where the interval lies above 1 in
     every seed compared, ``behind`` where below 1 in every one, ``mixed`` otherwise."""
     keys = ["scenario", "field", "seed"]
-    counted = ["failures", "episodes"]
-    baseline = runs.loc[runs["tester"] == STUDY_BASELINE, [*keys, *counted]].set_index(keys)
-    baseline.columns = [f"{name}_baseline" for name in counted]
     rows = []
-    for tester in sort_testers(runs["tester"]):
-        if tester == STUDY_BASELINE:
-            continue
-        own = runs.loc[runs["tester"] == tester, [*keys, *counted]].set_index(keys)
-        paired = own.join(baseline, how="inner").sort_index()
+    for tester, paired in _paired_with_baseline(runs, keys, ["failures", "episodes"]):
         for (scenario, field), group in paired.groupby(level=["scenario", "field"], sort=True):
             seeds, counts, ratios, sides = [], [], [], []
             for (_, _, seed), row in group.iterrows():
@@ -268,33 +260,39 @@ def lesson_1_by_case(runs: pd.DataFrame, confidence: float = 0.95) -> pd.DataFra
     return pd.DataFrame(rows)
 
 
-def _against_baseline(
-    table: pd.DataFrame, keys: list[str], value: str
-) -> list[tuple[str, tuple[int, int, int, int]]]:
+def _paired_with_baseline(
+    table: pd.DataFrame, keys: list[str], columns: list[str]
+) -> list[tuple[str, pd.DataFrame]]:
     """Per tester but the baseline that shares a case with it (a row with the same ``keys``
-    as a baseline row), in tester order: in how many cases its ``value`` is larger, equal or
-    smaller than the baseline's, and the cases. Without a shared case a tester is left out."""
-    baseline = table[table["tester"] == STUDY_BASELINE].set_index(keys)[value].rename("baseline")
-    counts = []
+    as a baseline row), in tester order: its ``columns`` and the baseline's (``NAME_baseline``)
+    in the cases they share, indexed by ``keys``. Without a shared case a tester is left out."""
+    baseline = table.loc[table["tester"] == STUDY_BASELINE, [*keys, *columns]].set_index(keys)
+    baseline.columns = [f"{name}_baseline" for name in columns]
+    pairs = []
     for tester in sort_testers(table["tester"]):
         if tester == STUDY_BASELINE:
             continue
-        group = table[table["tester"] == tester]
-        paired = group.set_index(keys)[value].to_frame("own").join(baseline, how="inner")
-        if paired.empty:
-            continue
-        own, other = paired["own"], paired["baseline"]
-        counts.append(
-            (
-                str(tester),
-                (
-                    int((own > other).sum()),
-                    int((own == other).sum()),
-                    int((own < other).sum()),
-                    len(paired),
-                ),
-            )
+        own = table.loc[table["tester"] == tester, [*keys, *columns]].set_index(keys)
+        paired = own.join(baseline, how="inner").sort_index()
+        if not paired.empty:
+            pairs.append((str(tester), paired))
+    return pairs
+
+
+def _against_baseline(
+    table: pd.DataFrame, keys: list[str], value: str
+) -> list[tuple[str, tuple[int, int, int, int]]]:
+    """Per tester that shares a case with the baseline (:func:`_paired_with_baseline`): in how
+    many cases its ``value`` is larger, equal or smaller than the baseline's, and the cases."""
+    counts = []
+    for tester, paired in _paired_with_baseline(table, keys, [value]):
+        own, other = paired[value], paired[f"{value}_baseline"]
+        more, same, fewer = (
+            int((own > other).sum()),
+            int((own == other).sum()),
+            int((own < other).sum()),
         )
+        counts.append((tester, (more, same, fewer, len(paired))))
     return counts
 
 
