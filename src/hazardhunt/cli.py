@@ -203,7 +203,7 @@ RegressClassifierOption = Annotated[
 
 EpisodesOption = Annotated[
     int | None,
-    typer.Option(help="Budget of episodes [default: 20,000, the study's, about half an hour]."),
+    typer.Option(help="Budget of episodes \\[default: 20,000, the study's, about half an hour]."),
 ]
 TesterParamOption = Annotated[
     list[str] | None,
@@ -238,7 +238,10 @@ SutErrorLimitOption = Annotated[
 )
 def run_command(
     scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
-    field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")],
+    field: Annotated[
+        str,
+        typer.Option(help="Protective field: none, 1.25m, 2m or a field the scenario defines."),
+    ],
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
     tester: Annotated[
         str, typer.Option(help=f"{', '.join(TESTERS)}, or yours as package.module:Class.")
@@ -437,9 +440,11 @@ def replay(
         announce=_announcer(),
     )
     verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
+    # An episode that has not ended when its recorded actions run out has no outcome.
+    replayed = replay.result.outcome or "no end (its recorded actions ran out)"
     console.print(
-        f"episode {episode}: recorded {replay.recorded_outcome} at "
-        f"{replay.recorded_sim_time:.2f} s, replayed {replay.result.outcome} at "
+        f"episode {episode}: recorded {shown(replay.recorded_outcome)} at "
+        f"{replay.recorded_sim_time:.2f} s, replayed {replayed} at "
         f"{replay.result.summary.sim_time:.2f} s: {verdict}"
     )
     for name, robustness in replay.recorded_robustness.items():
@@ -479,7 +484,8 @@ def campaign(
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign.
 
-    Exits with code 1 when some runs raised (after the others finished and the report).
+    Exits with code 1 when some runs raised (after the others finished); `hazardhunt report`
+    reads the runs that finished.
     """
     from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
     from hazardhunt.campaign.config import check_output_location, load_campaign
@@ -751,7 +757,10 @@ def estimate_command(
     scenario: Annotated[
         str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")
     ] = "crossing",
-    field: Annotated[str, typer.Option(help="Protective field: none, 1.25m or 2m.")] = "1.25m",
+    field: Annotated[
+        str,
+        typer.Option(help="Protective field: none, 1.25m, 2m or a field the scenario defines."),
+    ] = "1.25m",
     method: Annotated[
         str,
         typer.Option(
@@ -766,14 +775,14 @@ def estimate_command(
     people: Annotated[
         str | None,
         typer.Option(
-            help="Model of people: a model file (.toml) or package.module:Class [default: the "
+            help="Model of people: a model file (.toml) or package.module:Class \\[default: the "
             "built-in shop-floor walkers]."
         ),
     ] = None,
     uncertainties: Annotated[
         str | None,
         typer.Option(
-            help="The SUT's uncertainties: a file (.toml), or none [default: the built-in ones]."
+            help="The SUT's uncertainties: a file (.toml), or none \\[default: the built-in ones]."
         ),
     ] = None,
     controller: ControllerOption = None,
@@ -833,7 +842,9 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
         )
     console.print(table)
     equivalent = summary["monte_carlo_equivalent"]
-    if equivalent is not None and not summary.get("levels_warning"):
+    if equivalent is not None and summary["method"] == "mc":
+        console.print(f"relative error {equivalent['relative_error']:.0%}", highlight=False)
+    elif equivalent is not None and not summary.get("levels_warning"):
         console.print(
             f"relative error {equivalent['relative_error']:.0%}: plain Monte Carlo would need "
             f"about {equivalent['episodes_for_same_error']:,.0f} episodes for it "

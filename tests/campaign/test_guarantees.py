@@ -182,7 +182,7 @@ def test_a_second_run_into_the_same_out_is_refused_while_the_first_runs(
     # The finished run is not taken for the other seed's.
     again = hazardhunt(*run_args(out, 1))
     assert again.returncode == 2
-    assert "holds a finished run of another configuration" in again.stderr
+    assert "holds a finished run of another configuration (tester_plugin: there " in again.stderr
 
 
 # --- a worker process killed --------------------------------------------------------------------

@@ -51,18 +51,55 @@ def test_replay_command_confirms_and_animates(run_with_failures, tmp_path):
         assert animation.n_frames > 5
 
 
-def test_a_tampered_record_is_reported_as_not_reproduced(run_with_failures, tmp_path):
-    failures = pd.read_parquet(run_with_failures / "failures.parquet")
+def test_a_record_changed_since_the_run_is_refused_as_damaged(run_with_failures, tmp_path):
     tampered = tmp_path / "run"
-    tampered.mkdir()
-    for name in ("config.json", "episodes.parquet"):
-        (tampered / name).write_bytes((run_with_failures / name).read_bytes())
+    shutil.copytree(run_with_failures, tampered)
+    failures = pd.read_parquet(tampered / "failures.parquet")
+    episode = int(failures.loc[0, "episode"])
     standing = [[-1.0, 0.0]] * len(failures.loc[0, "actions"])
     failures["actions"] = [standing, *failures["actions"][1:]]  # the first stands still
     failures.to_parquet(tampered / "failures.parquet")
+    done = hazardhunt("replay", tampered, "--episode", episode)
+    assert done.returncode == 2
+    assert "the run is damaged (failures.parquet does not match its checksum" in done.stderr
+    assert "reproduced" not in done.stdout
+    # Truncated, it is refused the same way, not a traceback.
+    (tampered / "failures.parquet").write_bytes(b"PAR1")
+    done = hazardhunt("replay", tampered, "--episode", episode)
+    assert done.returncode == 2
+    assert "the run is damaged" in done.stderr
+    assert "Traceback" not in done.stderr
+    # A damaged summary is damage too: nothing says "reproduced" of a run that is not whole.
+    shutil.copy(run_with_failures / "failures.parquet", tampered / "failures.parquet")
+    (tampered / "summary.json").write_text("{")
+    done = hazardhunt("replay", tampered, "--episode", episode)
+    assert done.returncode == 2
+    assert "summary.json cannot be read" in done.stderr
+
+
+def test_a_signed_record_that_does_not_replay_is_not_reproduced(run_with_failures, tmp_path):
+    # A run whose checksums match, as its sender made it, but whose failure does not happen
+    # again: exit 1, "NOT reproduced", and what the replay did instead.
+    tampered = tmp_path / "run"
+    shutil.copytree(run_with_failures, tampered)
+    failures = pd.read_parquet(tampered / "failures.parquet")
+    standing = [[-1.0, 0.0]] * len(failures.loc[0, "actions"])
+    failures["actions"] = [standing, *failures["actions"][1:]]  # the first stands still
+    failures.to_parquet(tampered / "failures.parquet")
+    signed(tampered)
     done = hazardhunt("replay", tampered, "--episode", int(failures.loc[0, "episode"]))
     assert done.returncode == 1
     assert "NOT reproduced" in done.stdout
+    assert "replayed None" not in done.stdout
+
+
+def test_an_unfinished_run_is_a_clear_error(run_with_failures, tmp_path):
+    unfinished = tmp_path / "run"
+    shutil.copytree(run_with_failures, unfinished)
+    (unfinished / "summary.json").unlink()
+    done = hazardhunt("replay", unfinished, "--episode", 0)
+    assert done.returncode == 2
+    assert "the run has not finished (no summary.json)" in done.stderr
 
 
 def test_an_unknown_failure_is_a_clear_error(run_with_failures):
@@ -79,10 +116,15 @@ def received_copy(run_directory, folder, **plugins):
     config = json.loads((copy / "config.json").read_text())
     config["run"].update(plugins)
     (copy / "config.json").write_text(json.dumps(config))
-    summary = json.loads((copy / "summary.json").read_text())  # a sender's checksums match
-    summary["checksums"] = file_checksums(copy)
-    (copy / "summary.json").write_text(json.dumps(summary))
+    signed(copy)
     return copy
+
+
+def signed(run_directory):
+    """Record the checksums of a run's files as they are now, as a sender's would match."""
+    summary = json.loads((run_directory / "summary.json").read_text())
+    summary["checksums"] = file_checksums(run_directory)
+    (run_directory / "summary.json").write_text(json.dumps(summary))
 
 
 @pytest.fixture
@@ -240,4 +282,5 @@ def test_a_requirements_violation_replays_by_the_formula_recorded_with_it(tmp_pa
     # A violation whose record says another robustness is not reproduced.
     violations.loc[violations.index == row.name, "robustness"] = row["robustness"] - 0.1
     violations.to_parquet(directory / "violations.parquet")
+    signed(directory)
     assert not replay_failure(directory, int(row["episode"])).matches

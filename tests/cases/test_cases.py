@@ -98,6 +98,15 @@ def test_a_broken_case_file_names_the_file_and_key(cases, tmp_path):
     assert "broken.toml: environment.decision_period: missing" in done.stderr
 
 
+def test_a_case_file_that_is_not_text_is_a_clear_error(tmp_path):
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"format = 1\n\xff\xfe\x00garbage")
+    done = hazardhunt("regress", binary)
+    assert done.returncode == 2
+    assert "binary.toml: not a text file" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
 def drop(table, key):
     del table[key]
 
@@ -130,6 +139,21 @@ def drop(table, key):
             lambda case: case["environment"].__setitem__("seed", "zero"),
             "environment.seed: Input should be a valid integer",
             id="bad-seed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("seed", -4),
+            "environment.seed: Input should be greater than or equal to 0",
+            id="negative-seed",
+        ),
+        pytest.param(
+            lambda case: case["expected"].__setitem__("outcome", "explode"),
+            "expected.outcome: unknown outcome 'explode': use one of goal, failure",
+            id="unknown-outcome",
+        ),
+        pytest.param(
+            lambda case: case["expected"].__setitem__("sim_time", "7.2"),
+            "expected.sim_time: Input should be a valid number",
+            id="time-as-text",
         ),
         pytest.param(
             lambda case: case["expected"].__setitem__("class", ["side-left/no-stop"]),

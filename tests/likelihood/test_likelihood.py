@@ -3,6 +3,7 @@ episodes that replay from their draw, estimators whose intervals cover a known p
 estimates that resume, and bad input refused before anything runs."""
 
 import json
+from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +112,36 @@ def test_an_uncertainty_that_can_leave_its_range_is_refused(tmp_path):
     path.write_text('[effects]\nwheel_slip = { distribution = "uniform", low = 0, high = 1 }\n')
     with pytest.raises(ModelError, match="unknown wheel_slip"):
         load_uncertainties(str(path))
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        (
+            'speed = { distribution = "truncnorm", mean = 5.5, sd = 0.2, low = 5.0, high = 6.0 }',
+            "behaviour: speed: its values must lie in [0, 1.5], but the distribution reaches "
+            "[5, 6]",
+        ),
+        (
+            'start_delay = { distribution = "normal", mean = 5.0, sd = 1.0 }',
+            "behaviour: start_delay: its values must lie in [0, inf]",
+        ),
+        (
+            'looks = { distribution = "uniform", low = 0.0, high = 2.0 }',
+            "behaviour: looks: its values must lie in [0, 1]",
+        ),
+    ],
+)
+def test_a_behaviour_the_simulated_human_cannot_play_is_refused(tmp_path, line, message):
+    built_in = (files("hazardhunt.likelihood") / "people.toml").read_text()
+    name = line.split(" = ", 1)[0]
+    lines = [line if row.startswith(f"{name} = ") else row for row in built_in.splitlines()]
+    path = tmp_path / "people.toml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ModelError) as refused:
+        load_model(str(path), walker_simulation().scenario)
+    assert str(refused.value).startswith(f"{path}: behaviour: {name}")
+    assert message in str(refused.value)
 
 
 def test_nominal_effects_play_the_nominal_episode_and_effects_replay_exactly():
@@ -305,7 +336,7 @@ def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
     other = EstimateConfig(
         episodes=300, seed=1, estimator=EstimatorParams(method="ce", batch_size=100)
     )
-    with pytest.raises(ValueError, match=r"another configuration .*seed"):
+    with pytest.raises(ValueError, match=r"another configuration \(seed: there 0, here 1\)"):
         EstimateRun(other, tmp_path, source=toy)
 
 
@@ -340,6 +371,28 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert f"{summary['probability']['probability']:.3g}" in page
     assert page.count("data:image/png") >= 2  # the convergence and a most likely failure
     assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
+    damaged_estimates_are_named_and_mend(tmp_path / "est", done.args[3:])
+
+
+def damaged_estimates_are_named_and_mend(directory, command):
+    """A damaged estimate directory is a one-line error naming the file, never a traceback;
+    deleting a damaged batch and running the command again plays it anew, as it was."""
+    written = (directory / "estimate.json").read_text()
+    (directory / "estimate.json").write_text("{")
+    shown = hazardhunt("report", directory, cwd=ROOT)
+    assert shown.returncode == 2
+    assert "estimate.json: cannot be read" in shown.stderr
+    (directory / "estimate.json").write_text(written)
+    batch = directory / "batches" / "00001.parquet"
+    batch.write_bytes(batch.read_bytes()[:100])
+    for again in (hazardhunt(*command, cwd=ROOT), hazardhunt("report", directory, cwd=ROOT)):
+        assert again.returncode == 2
+        assert "00001.parquet: cannot be read" in again.stderr
+        assert "Traceback" not in again.stderr
+    batch.unlink()
+    again = hazardhunt(*command, cwd=ROOT)
+    assert again.returncode == 0, again.stderr
+    assert (directory / "estimate.json").read_text() == written
 
 
 class SometimesCrashing(ClosedFormEncounters):
@@ -371,14 +424,40 @@ def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):
     assert small.returncode == 2
     assert "fewer than 3 batches" in small.stderr
     assert not (tmp_path / "small").exists()
-    broken = hazardhunt(
-        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
-        "--episodes", 100, "--batch-size", 50, "--out", tmp_path / "broken",
-        "--controller", "tests.campaign.test_nothing_tested:ResetRaises", cwd=ROOT,
-    )  # fmt: skip
+    for options, message in (
+        (("--batch-size", 500), "batch_size: batches of 500 episodes are more than the budget"),
+        (("--field", "3m"), "field: unknown field '3m': use one of none, 1.25m, 2m"),
+    ):
+        refused = hazardhunt(
+            "estimate", "--episodes", 100, *options, "--out", tmp_path / "small", cwd=ROOT
+        )
+        assert refused.returncode == 2
+        assert message in refused.stderr
+        assert "Traceback" not in refused.stderr
+        assert not (tmp_path / "small").exists()
+    # A controller that cannot start an episode stops on the trial episode, before anything
+    # is written, naming what it raised.
+    broken = estimate_with(tmp_path / "broken", "ResetRaises")
+    assert broken.returncode == 2
+    assert "reset() raised FileNotFoundError: map.yaml" in broken.stderr
+    assert "on a trial episode before the estimate" in broken.stderr
+    assert not (tmp_path / "broken").exists()
+    # One that passes the trial and raises in every episode: exit 1, the first error named,
+    # and nothing kept, so that the same command starts anew once the controller is mended.
+    broken = estimate_with(tmp_path / "broken", "RaisesOnceTheHumanMoves")
     assert broken.returncode == 1
+    assert "every one of the 100 episodes ended in a SUT error" in broken.stderr
+    assert "(the first: controller: RuntimeError: lost the localisation)" in broken.stderr
     assert "nothing was tested" in broken.stderr
-    assert not (tmp_path / "broken" / "estimate.json").exists()
+    assert not (tmp_path / "broken").exists()
+
+
+def estimate_with(out, controller):
+    return hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--batch-size", 50, "--out", out,
+        "--controller", f"tests.campaign.test_nothing_tested:{controller}", cwd=ROOT,
+    )  # fmt: skip
 
 
 def test_a_weight_that_overflows_is_reported_not_dropped():

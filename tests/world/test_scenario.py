@@ -76,6 +76,13 @@ def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expect
     assert expected in message
 
 
+def test_a_scenario_file_that_is_not_text_names_the_file(tmp_path):
+    path = tmp_path / "binary.toml"
+    path.write_bytes(VALID.encode() + b"\xff\xfe")
+    with pytest.raises(ScenarioError, match=r"binary\.toml: not a text file"):
+        load_scenario(path)
+
+
 def test_a_missing_scenario_says_which_ones_exist(tmp_path):
     with pytest.raises(ScenarioError, match="crossing, head-on, overtaking"):
         load_scenario(tmp_path / "nope.toml")

@@ -32,6 +32,7 @@ from hazardhunt.likelihood.run import (
     draw_of,
     encounters_of,
     load_config,
+    played_batches,
 )
 
 
@@ -48,18 +49,26 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
     """
     say = tell or (lambda step: None)
     config = load_config(directory)
-    try:
-        summary = json.loads((directory / "estimate.json").read_text())
-    except (OSError, json.JSONDecodeError):
+    path = directory / "estimate.json"
+    if not path.is_file():
         raise InputError(
             f"{directory}: the estimate is not finished (no estimate.json); run its "
             "hazardhunt estimate command again to finish it"
+        )
+    try:
+        summary = json.loads(path.read_text())
+        if not isinstance(summary, dict) or not isinstance(summary.get("probability"), dict):
+            raise ValueError("not an estimate's summary")
+    except (OSError, UnicodeDecodeError, ValueError) as error:  # JSONDecodeError too
+        raise InputError(
+            f"{path}: cannot be read ({error}); run the estimate's hazardhunt estimate command "
+            "again to write it anew from the batches"
         ) from None
     say("reading episodes")
-    episodes = pd.concat(
-        (pd.read_parquet(p) for p in sorted((directory / "batches").glob("*.parquet"))),
-        ignore_index=True,
-    )
+    batches = played_batches(directory)
+    if not batches:
+        raise InputError(f"{directory}: the estimate's batches are missing (batches/)")
+    episodes = pd.concat(batches, ignore_index=True)
     final = directory / "report"
     scratch = directory / ".report.partial"
     shutil.rmtree(scratch, ignore_errors=True)

@@ -251,6 +251,14 @@ def _check_fields(scenario: str, fields: list[str]) -> None:
         field_shape(loaded, name)
 
 
+def scenario_field(cls: type, value: str, info: ValidationInfo) -> str:
+    """A configuration's validator of its ``field``: built in or defined by its ``scenario``
+    (``_field_ok = field_validator("field")(scenario_field)``)."""
+    if "scenario" in info.data:
+        _check_fields(info.data["scenario"], [value])
+    return value
+
+
 def file_name(name: str) -> str:
     """``name`` as one path component that stays where it is put: every run of characters
     but letters, digits, ``_``, ``.`` and ``-`` becomes ``_``, and leading dots go."""
@@ -331,12 +339,7 @@ class RunConfig(_Strict):
             requirements_of(value)  # a formula that cannot be monitored stops the run here
         return value
 
-    @field_validator("field")
-    @classmethod
-    def _field_ok(cls, value: str, info: ValidationInfo) -> str:
-        if "scenario" in info.data:
-            _check_fields(info.data["scenario"], [value])
-        return value
+    _field_ok = field_validator("field")(scenario_field)
 
     @field_validator("tester")
     @classmethod

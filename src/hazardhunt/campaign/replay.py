@@ -22,7 +22,8 @@ from pydantic import ValidationError
 
 from hazardhunt.campaign.config import STORED, RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
-from hazardhunt.campaign.run import simulation_of
+from hazardhunt.campaign.run import is_finished, simulation_of
+from hazardhunt.campaign.store import find_damage
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
@@ -93,11 +94,21 @@ def load_run_config(run_directory: Path) -> RunConfig:
 
 def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str, Any]]:
     """The run's configuration and the failure's row (or, for an episode that violated a
-    requirement without a failure, its first violation's row)."""
+    requirement without a failure, its first violation's row).
+
+    Raises:
+        ReplayError: The run has not finished, its files do not match their checksums (or do
+            not read), or it recorded no failure in ``episode``.
+    """
     config = load_run_config(run_directory)
+    if not is_finished(run_directory):
+        raise ReplayError(f"{run_directory}: the run has not finished (no summary.json)")
+    damage = find_damage(run_directory)
+    if damage is not None:
+        raise ReplayError(f"{run_directory}: the run is damaged ({damage}); nothing replayed")
     failures_path = run_directory / "failures.parquet"
     if not failures_path.is_file():
-        raise ReplayError(f"{run_directory}: the run has not finished (no failures.parquet)")
+        raise ReplayError(f"{run_directory}: the run recorded no failures.parquet")
     failures = pd.read_parquet(failures_path)
     match = failures[failures["episode"] == episode]
     if match.empty:
@@ -105,9 +116,13 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
         if violations:
             return config, violations[0]
         known = ", ".join(str(i) for i in failures["episode"].head(10))
+        recorded = (
+            f"{len(failures)} failures: {known}{' ...' if len(failures) > 10 else ''}"
+            if known
+            else "no failure"
+        )
         raise ReplayError(
-            f"{run_directory}: no failure in episode {episode} (the run recorded "
-            f"{len(failures)}{': ' + known if known else ''}{' ...' if len(failures) > 10 else ''})"
+            f"{run_directory}: no failure in episode {episode} (the run recorded {recorded})"
         )
     return config, match.iloc[0].to_dict()
 

@@ -23,7 +23,6 @@ from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-import numpy as np
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -36,7 +35,7 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import ConfigError, EnvOptions, RunConfig
+from hazardhunt.campaign.config import ConfigError, EnvOptions, RunConfig, first_difference
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.plugins import (
     PluginSpec,
@@ -47,8 +46,9 @@ from hazardhunt.campaign.plugins import (
 )
 from hazardhunt.campaign.records import RunSummary, cpu_seconds
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
+from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.env.agv import AGVEnv
-from hazardhunt.errors import HazardhuntError, PluginError
+from hazardhunt.errors import HazardhuntError
 from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.spec.requirements import requirements_of
@@ -120,10 +120,6 @@ def simulation_of(config: RunConfig) -> Simulation:
     )
 
 
-TRIAL_ACTION = np.array([-1.0, 0.0])
-"""The human's action on the trial episode of :func:`check_sut`: standing still."""
-
-
 def check_sut(config: RunConfig) -> None:
     """Exercise the run's controller and safety-layer plug-ins once on a trial episode (reset,
     then one decision of a human standing still, against a simulation of its own), so that a
@@ -137,24 +133,7 @@ def check_sut(config: RunConfig) -> None:
     """
     if config.controller is None and config.safety_layer is None:
         return
-    simulation = simulation_of(config)
-    simulation.reset()
-    simulation.decide(TRIAL_ACTION)
-    summary = simulation.summary()
-    tried = (
-        ("controller", config.controller, summary.controller_errors, "control()"),
-        ("safety layer", config.safety_layer, summary.safety_layer_errors, "update()"),
-    )
-    for kind, spec, errors, call in tried:
-        if not errors:
-            continue
-        name = "the built-in one" if spec is None else repr(spec.path)
-        error = errors[0]
-        if call not in error and not error.startswith("reset()"):
-            error = f"{call} raised {error}"
-        raise PluginError(
-            f"{kind} {name}: {error} (on a trial episode before the run; nothing was run)"
-        )
+    try_plugins(simulation_of(config), config.controller, config.safety_layer)
 
 
 def make_run_tester(config: RunConfig) -> Tester:
@@ -425,8 +404,11 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
             f"{out}: holds a damaged run ({damage or 'config.json cannot be read'}); "
             "delete it or choose another --out"
         ) from None
-    if RunConfig.model_validate(stored) != config:
-        raise ConfigError(f"{out}: holds a finished run of another configuration")
+    if (found := RunConfig.model_validate(stored)) != config:
+        raise ConfigError(
+            f"{out}: holds a finished run of another configuration "
+            f"({first_difference(found, config)}); choose another --out"
+        )
     if damage is not None:
         if console is not None:
             console.print(f"{out}: damaged ({damage}); running it again")

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
 from hazardhunt.campaign.config import EnvOptions
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
@@ -43,6 +43,7 @@ from hazardhunt.campaign.store import sut_error_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
+from hazardhunt.spec.outcomes import Outcome
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.testers.objective import violation_class
@@ -61,10 +62,15 @@ else:  # pragma: no cover
 CASE_FORMAT = 1
 """Version of the case file layout."""
 VERDICTS = ("still fails", "changed", "error", "fixed")
+OUTCOMES = tuple(outcome.value for outcome in Outcome)
 
 
 class CaseError(InputError):
     """A case file that cannot be used; the message names the file and the key."""
+
+
+_Number = Annotated[float, Strict()]
+"""An int or a float, not a string or a boolean."""
 
 
 class _CaseTable(BaseModel):
@@ -76,7 +82,7 @@ class _CaseEnvironment(EnvOptions):
     """The episode's field setting and seed, beside the run's environment options."""
 
     field: str
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, le=2**32 - 1)
     # Required in a case, which replays with the options it was found with rather than with
     # today's defaults; EnvOptions checks their values when the options are built.
     decision_period: float
@@ -95,9 +101,16 @@ class _CaseEnvironment(EnvOptions):
 class _CaseExpected(_CaseTable):
     failure_class: str = Field(alias="class")
     outcome: str = "failure"
-    sim_time: float | None = None
+    sim_time: _Number | None = None
     """When the failure happened, in s."""
     contact_face: str = ""
+
+    @field_validator("outcome")
+    @classmethod
+    def _known_outcome(cls, value: str) -> str:
+        if value not in OUTCOMES:
+            raise ValueError(f"unknown outcome {value!r}: use one of {', '.join(OUTCOMES)}")
+        return value
 
 
 class _CasePlugin(_CaseTable):
@@ -109,10 +122,6 @@ class _CasePlugin(_CaseTable):
 class _CaseSut(_CaseTable):
     controller: _CasePlugin | None = None
     safety_layer: _CasePlugin | None = None
-
-
-_Number = Annotated[float, Strict()]
-"""An int or a float, not a string or a boolean."""
 
 
 class _CaseHuman(_CaseTable):
@@ -301,6 +310,8 @@ def _read_case(path: Path) -> _Case:
         raise CaseError(f"{path}: not valid TOML: {error}") from None
     except OSError as error:
         raise CaseError(f"{path}: cannot be read: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise CaseError(f"{path}: not a text file: {error.reason}") from None
     # Checked first: a file of another layout would otherwise fail on whatever differs.
     if data.get("format") != CASE_FORMAT:
         raise CaseError(

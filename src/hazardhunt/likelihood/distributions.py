@@ -162,3 +162,25 @@ def sample(dims: Sequence[Dimension], rng: np.random.Generator) -> dict[str, flo
 def log_prob(dims: Sequence[Dimension], values: Mapping[str, float]) -> float:
     """The joint log-density of independent ``dims`` at ``values`` (-inf outside the support)."""
     return sum((dim.log_prob(values[dim.name]) for dim in dims), 0.0)
+
+
+def check_ranges(
+    where: str, dims: Sequence[Dimension], ranges: Mapping[str, tuple[float, float]]
+) -> None:
+    """Check that every draw of each dimension named in ``ranges`` lies within its range: a
+    value the simulation cannot play (it would clip or ignore it) would make the estimate one
+    of another model than the file's.
+
+    Raises:
+        DistributionError: The first dimension whose distribution reaches outside its range.
+    """
+    for dim in dims:
+        if dim.name not in ranges:
+            continue
+        low, high = (float(v) for v in dim.distribution.support())
+        lowest, highest = ranges[dim.name]
+        if low < lowest or high > highest:
+            raise DistributionError(
+                f"{where}: {dim.name}: its values must lie in [{lowest:g}, {highest:g}], but "
+                f"the distribution reaches [{low:g}, {high:g}] (bound it: uniform, truncnorm)"
+            )

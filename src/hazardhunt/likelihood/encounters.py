@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from hazardhunt.campaign.store import sut_error_of
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.people import HumanModel, ModelError
 from hazardhunt.likelihood.uncertainty import Uncertainties
@@ -40,6 +41,8 @@ class Played:
     min_clearance: float
     sim_time: float
     sut_error: bool
+    error: str = ""
+    """What the SUT raised (or how it failed), for an encounter that ended in a SUT error."""
 
 
 class EncounterSource(Protocol):
@@ -119,6 +122,7 @@ class SimulationEncounters:
             min_clearance=float(summary.min_clearance),
             sim_time=float(summary.sim_time),
             sut_error=summary.outcome == "sut_error",
+            error=sut_error_of(summary) if summary.outcome == "sut_error" else "",
         )
 
 
@@ -132,4 +136,5 @@ def played_row(played: Played) -> dict[str, Any]:
         "min_clearance": played.min_clearance,
         "sim_time": played.sim_time,
         "sut_error": played.sut_error,
+        "error": played.error,
     }

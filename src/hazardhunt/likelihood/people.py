@@ -31,6 +31,7 @@ from hazardhunt.errors import InputError
 from hazardhunt.likelihood.distributions import (
     Dimension,
     DistributionError,
+    check_ranges,
     dimension,
     dimensions,
     log_prob,
@@ -39,6 +40,7 @@ from hazardhunt.likelihood.distributions import (
 from hazardhunt.sim.simulation import Action, Policy, Simulation
 from hazardhunt.sut.plugins import build
 from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.geometry import point_rectangle_clearance
 from hazardhunt.world.scenario import Scenario
 
@@ -50,6 +52,18 @@ CHECK_SAMPLES = 64
 
 STAND = np.array([-1.0, 0.0], dtype=np.float32)
 """The normalised action of a human who stands still."""
+
+BEHAVIOUR_RANGES = {
+    "speed": (0.0, HumanParams().max_speed),
+    "start_delay": (0.0, math.inf),
+    "pauses": (0.0, 1.0),
+    "pause_after": (0.0, math.inf),
+    "pause_duration": (0.0, math.inf),
+    "looks": (0.0, 1.0),
+}
+"""The values each behaviour may take (m/s, s, yes or no, s, s, yes or no): a walker faster
+than the simulated human can walk would be slowed to its largest speed, a negative delay or
+duration played as none, so that the estimate would be of another model than the file's."""
 
 
 class ModelError(InputError):
@@ -146,6 +160,7 @@ class WalkerModel:
             raise ModelError(f"{where}: behaviour: unknown {', '.join(extra)}")
         try:
             dims = dimensions(f"{where}: behaviour", behaviour)
+            check_ranges(f"{where}: behaviour", dims, BEHAVIOUR_RANGES)
         except DistributionError as error:
             raise ModelError(str(error)) from None
         self.walking = _walking(where, data.get("walking", {}))

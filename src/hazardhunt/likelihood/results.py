@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
-from hazardhunt.likelihood.run import EstimateConfig, EstimateError
+from hazardhunt.likelihood.run import EstimateConfig, EstimateError, nothing_tested
 from hazardhunt.likelihood.splitting import SplittingPlanner, level_records, splitting_estimate
 
 TARGET_RELATIVE_ERROR = 0.3
@@ -50,10 +50,7 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
     """
     errors = int(table["sut_error"].sum())
     if errors == len(table):
-        raise EstimateError(
-            f"every one of the {len(table)} episodes ended in a SUT error: nothing was tested, "
-            "no probability can be given"
-        )
+        raise EstimateError(nothing_tested(table))
     classes_found = sorted(set(table.loc[table["failure"], "failure_class"]))
     if config.estimator.method == "splitting":
         overall, classes, points, counted = _splitting(config, table, classes_found, threshold)

@@ -13,6 +13,7 @@ The directory is data: nothing in it is imported or called.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import multiprocessing
 import os
@@ -22,11 +23,12 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.config import EnvOptions, first_difference, scenario_field
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.run import build_simulation
+from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.encounters import (
@@ -71,19 +73,39 @@ class EstimateConfig(BaseModel):
     episodes: int = Field(default=2000, ge=MIN_EPISODES, le=10_000_000)
     seed: int = Field(default=0, ge=0, le=2**32 - 1)
 
+    _field_ok = field_validator("field")(scenario_field)
+
 
 class EstimateError(HazardhuntError):
     """An estimate that could not be done (every episode a SUT error, a weight that overflows)."""
+
+
+def nothing_tested(table: pd.DataFrame) -> str:
+    """Why an estimate whose every episode ended in a SUT error gives no probability, with the
+    first error (a table written before errors were recorded has none to name)."""
+    errors = table["error"] if "error" in table else pd.Series(dtype=str)
+    first = next((str(e) for e in errors if isinstance(e, str) and e), None)
+    cause = f" (the first: {first})" if first else ""
+    return (
+        f"every one of the {len(table)} episodes ended in a SUT error{cause}: nothing was "
+        "tested, no probability can be given"
+    )
 
 
 def check_budget(config: EstimateConfig) -> None:
     """Refuse a budget too small for an interval.
 
     Raises:
-        InputError: ``ce`` with fewer than three batches (one to look, one to move, one to
-            use), ``splitting`` with too few episodes for two levels.
+        InputError: A batch larger than the budget, ``ce`` with fewer than three batches (one
+            to look, one to move, one to use), ``splitting`` with too few episodes for two
+            levels.
     """
     size, method, episodes = config.estimator.batch_size, config.estimator.method, config.episodes
+    if size > episodes:
+        raise InputError(
+            f"batch_size: batches of {size} episodes are more than the budget of {episodes}; "
+            "give a --batch-size of at most --episodes"
+        )
     if method == "ce" and episodes < 3 * size:
         raise InputError(
             f"episodes: {episodes} episodes in batches of {size} give cross-entropy importance "
@@ -136,22 +158,33 @@ class EstimateRun:
 
         Raises:
             InputError: The directory holds another estimate, or the budget is too small.
+            PluginError: A plug-in of the SUT does not load, or fails on a trial episode;
+                nothing is written.
         """
         check_budget(config)
         self.config = config
         self.directory = directory
-        self.source = source if source is not None else encounters_of(config)
-        self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
+        # Built here from ``config``, the encounters can be built again in worker processes.
         self.workers = workers if source is None else 1
+        if source is None:
+            encounters = encounters_of(config)
+            if config.controller is not None or config.safety_layer is not None:
+                try_plugins(
+                    encounters.simulation, config.controller, config.safety_layer, "the estimate"
+                )
+            source = encounters
+        self.source = source
+        self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
         self._pool: ProcessPoolExecutor | None = None
         _claim(directory, config)
 
     def played(self) -> list[pd.DataFrame]:
-        """The finished batches, in order (stopping at the first missing one)."""
-        tables: list[pd.DataFrame] = []
-        while (path := batch_path(self.directory, len(tables))).exists():
-            tables.append(pd.read_parquet(path))
-        return tables
+        """The finished batches, in order (stopping at the first missing one).
+
+        Raises:
+            InputError: A batch's file does not read (:func:`played_batches`).
+        """
+        return played_batches(self.directory)
 
     def run(self, progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
         """Play every missing batch; the whole episode table.
@@ -174,7 +207,23 @@ class EstimateRun:
             self.close()
         if progress is not None:
             progress(config.episodes, config.episodes)
-        return pd.concat(tables, ignore_index=True)
+        table = pd.concat(tables, ignore_index=True)
+        if len(table) and table["sut_error"].all():
+            self._discard(len(tables))
+            raise EstimateError(f"{nothing_tested(table)}; nothing of it was kept")
+        return table
+
+    def _discard(self, batches: int) -> None:
+        """Delete what the estimate wrote (its batches and ``config.json``; the directory
+        too once empty), so that the same command plays it anew once the SUT is mended."""
+        for batch in range(batches):
+            path = batch_path(self.directory, batch)
+            path.unlink(missing_ok=True)
+            path.with_suffix(".json").unlink(missing_ok=True)
+        (self.directory / "config.json").unlink(missing_ok=True)
+        for folder in (batch_path(self.directory, 0).parent, self.directory):
+            with contextlib.suppress(OSError):  # it holds files the estimate did not write
+                folder.rmdir()
 
     def _play(self, batch_draws: Sequence[Draw]) -> list[Played]:
         if self.workers <= 1:
@@ -217,6 +266,25 @@ def batch_path(directory: Path, batch: int) -> Path:
     return directory / "batches" / f"{batch:05d}.parquet"
 
 
+def played_batches(directory: Path) -> list[pd.DataFrame]:
+    """The finished batches of the estimate in ``directory``, in order (stopping at the first
+    missing one).
+
+    Raises:
+        InputError: A batch's file does not read (truncated or changed since it was written).
+    """
+    tables: list[pd.DataFrame] = []
+    while (path := batch_path(directory, len(tables))).exists():
+        try:
+            tables.append(pd.read_parquet(path))
+        except (OSError, ValueError) as error:  # pyarrow's ArrowInvalid is a ValueError
+            raise InputError(
+                f"{path}: cannot be read ({error}); delete it and run the estimate's command "
+                "again: it plays that batch and the ones after it anew, as they were"
+            ) from None
+    return tables
+
+
 def draw_of(row: Any, dims: Sequence[Dimension]) -> Draw:
     """The draw an episode table's row records."""
     return Draw({dim.name: float(row[f"x.{dim.name}"]) for dim in dims}, int(row["noise_seed"]))
@@ -242,12 +310,12 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     if path.exists():
         # Read as a configuration, so that settings added since it was written take their
         # defaults: an estimate of an earlier version resumes.
-        found = load_config(directory).model_dump(mode="json")
-        if found != wanted:
-            differ = sorted(k for k in set(found) | set(wanted) if found.get(k) != wanted.get(k))
+        found = load_config(directory)
+        if found.model_dump(mode="json") != wanted:
             raise InputError(
-                f"{directory}: holds an estimate of another configuration ({', '.join(differ)} "
-                "differ); choose another --out or give the same options to resume it"
+                f"{directory}: holds an estimate of another configuration "
+                f"({first_difference(found, config)}); choose another --out or give the same "
+                "options to resume it"
             )
         return
     directory.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from hazardhunt.likelihood.distributions import Dimension, DistributionError, dimensions
+from hazardhunt.likelihood.distributions import (
+    Dimension,
+    DistributionError,
+    check_ranges,
+    dimensions,
+)
 from hazardhunt.likelihood.people import ModelError
 from hazardhunt.sim.effects import SutEffects
 from hazardhunt.textfiles import TOMLDecodeError, loads_toml
@@ -71,17 +76,14 @@ def load_uncertainties(spec: str | Path | None) -> Uncertainties:
         )
     try:
         dims = dimensions(f"{where}: effects", data["effects"])
+        check_ranges(f"{where}: effects", dims, EFFECT_RANGES)
     except DistributionError as error:
         raise ModelError(str(error)) from None
     for dim in dims:
-        low, high = (float(v) for v in dim.distribution.support())
-        lowest, highest = EFFECT_RANGES[dim.name]
-        if low < lowest or high > highest or (dim.name == "brake_deceleration" and low <= 0):
-            above = " (above 0)" if dim.name == "brake_deceleration" else ""
+        if dim.name == "brake_deceleration" and float(dim.distribution.support()[0]) <= 0:
             raise ModelError(
-                f"{where}: effects: {dim.name}: its values must lie in "
-                f"[{lowest:g}, {highest:g}]{above}, but the distribution reaches "
-                f"[{low:g}, {high:g}] (bound it: uniform, truncnorm)"
+                f"{where}: effects: brake_deceleration: its values must lie above 0, but the "
+                "distribution reaches 0 (bound it: uniform, truncnorm)"
             )
     return Uncertainties(dims, where)
 

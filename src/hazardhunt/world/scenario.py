@@ -223,6 +223,8 @@ def _parse(path: Path, model: type[_Strict]) -> Any:
         raise ScenarioError(f"{path}: not valid TOML: {error}") from error
     except OSError as error:
         raise ScenarioError(f"{path}: cannot be read: {error.strerror}") from error
+    except UnicodeDecodeError as error:
+        raise ScenarioError(f"{path}: not a text file: {error.reason}") from None
     try:
         return model.model_validate(data)
     except ValidationError as error:
