@@ -29,6 +29,21 @@ def test_version_prints_the_package_version() -> None:
     assert hazardhunt.__version__ == packaged
 
 
+@pytest.mark.parametrize(
+    ("subcommand", "shown"),
+    [
+        ("run", "Budget of episodes [default: 20,000"),
+        ("estimate", "package.module:Class [default: the built-in shop-floor walkers]"),
+        ("estimate", "or none [default: the built-in ones]"),
+    ],
+)
+def test_help_shows_the_defaults_written_in_brackets(subcommand: str, shown: str) -> None:
+    # Rich reads an unescaped "[default: ...]" as markup and drops it from the help.
+    result = command(subcommand, "--help")
+    assert result.returncode == 0, result.stderr
+    assert shown in " ".join(result.stdout.split())
+
+
 def test_new_sut_writes_a_starting_point_and_refuses_a_folder_in_use(tmp_path: Path) -> None:
     folder = tmp_path / "my_robot"
     result = command("new-sut", folder)

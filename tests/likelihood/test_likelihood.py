@@ -347,6 +347,7 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "failures per" in done.stdout
+    assert "plain Monte Carlo would need" not in done.stdout  # no comparison with itself
     summary = json.loads((tmp_path / "est" / "estimate.json").read_text())
     assert summary["probability"]["failures"] > 0
     likeliest = summary["most_likely"]["all"]

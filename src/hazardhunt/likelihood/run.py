@@ -83,8 +83,7 @@ class EstimateError(HazardhuntError):
 def nothing_tested(table: pd.DataFrame) -> str:
     """Why an estimate whose every episode ended in a SUT error gives no probability, with the
     first error (a table written before errors were recorded has none to name)."""
-    errors = table["error"] if "error" in table else pd.Series(dtype=str)
-    first = next((str(e) for e in errors if isinstance(e, str) and e), None)
+    first = next((e for e in table.get("error", ()) if isinstance(e, str) and e), None)
     cause = f" (the first: {first})" if first else ""
     return (
         f"every one of the {len(table)} episodes ended in a SUT error{cause}: nothing was "
