@@ -37,6 +37,7 @@ from typing import Any
 import tomllib
 from pydantic import ValidationError
 
+import hazardhunt
 from hazardhunt.benchmark.conservative import MUTANTS, ConservativeController
 from hazardhunt.benchmark.held_out import HELD_OUT_MUTANTS
 from hazardhunt.campaign.config import PluginSpec, RunConfig
@@ -271,6 +272,7 @@ def main() -> None:
         {
             "command": shlex.join([Path(sys.executable).name, *sys.argv]),
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "blas": hazardhunt.blas_kernel(),
             "arguments": {k: str(v) for k, v in vars(args).items()},
             "wall_time_s": wall,
             "scores": rows,

@@ -219,7 +219,11 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def versions() -> dict[str, str]:
-    found = {"python": platform.python_version(), "source_digest": hazardhunt.source_digest()}
+    found = {
+        "python": platform.python_version(),
+        "source_digest": hazardhunt.source_digest(),
+        "blas": hazardhunt.blas_kernel(),
+    }
     for name in VERSIONED:
         try:
             found[name] = metadata.version(name)

@@ -39,4 +39,24 @@ def source_digest() -> str:
     return digest.hexdigest()[:12]
 
 
-__all__ = ["ENV_ID", "__version__", "source_digest"]
+def blas_kernel() -> str:
+    """numpy's BLAS library and the kernel it picked for this CPU (``openblas 0.3.31
+    Haswell``), or ``unknown``.
+
+    Recorded with every run: a search whose numbers pass through BLAS (the covariance of the
+    quality-diversity emitters) draws other episodes with another kernel, so a run reproduces
+    from its seed where the kernel is the same (docs/design.md, "Determinism").
+    """
+    from threadpoolctl import threadpool_info  # imported only when a run is recorded
+
+    libraries = [info for info in threadpool_info() if info.get("user_api") == "blas"]
+    # A wheel's library sits in numpy.libs; scipy's own may be loaded beside it.
+    numpys = [info for info in libraries if "numpy" in Path(info["filepath"]).parent.name]
+    if not numpys + libraries:
+        return "unknown"
+    library = (numpys + libraries)[0]
+    keys = ("internal_api", "version", "architecture")
+    return " ".join(str(library[key]) for key in keys if library.get(key))
+
+
+__all__ = ["ENV_ID", "__version__", "blas_kernel", "source_digest"]

@@ -43,6 +43,14 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True, soft_wrap=True)
+
+
+def _transient_bar(on: Console) -> Progress:
+    """A progress bar that disappears when done; none where ``on`` is not a terminal (a
+    transient bar leaves an empty line in a pipe or a file)."""
+    return Progress(console=on, transient=True, disable=not on.is_terminal)
+
+
 T = TypeVar("T")
 
 
@@ -92,7 +100,7 @@ def scenarios(
         "scenario", "outcome", "sim time (s)", "min clearance (m)", "emergency stops", "picture"
     )
     rng = np.random.default_rng(seed)
-    with Progress(console=console, transient=True) as progress:
+    with _transient_bar(console) as progress:
         task = progress.add_task("simulating", total=len(chosen))
         for name in chosen:
             progress.update(task, description=f"simulating {name}")
@@ -532,7 +540,7 @@ def report(
     from hazardhunt.campaign.plugins import make_classifier
 
     if is_estimate(directory):
-        with Progress(console=console, transient=True) as progress:
+        with _transient_bar(console) as progress:
             task = progress.add_task("report", total=None)
             index = write_estimate_report(
                 directory, lambda step: progress.update(task, description=f"report: {step}")
@@ -543,7 +551,7 @@ def report(
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None
     _warn_of_damaged_runs(directory)
-    with Progress(console=console, transient=True) as progress:
+    with _transient_bar(console) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
             directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
@@ -671,7 +679,7 @@ def regress(
     files = case_files(cases)
     announce = _announcer()
     results = []
-    with Progress(console=err_console, transient=True) as progress:
+    with _transient_bar(err_console) as progress:
         task = progress.add_task("re-running cases", total=len(files))
         for path in files:
             results.append(
@@ -812,7 +820,7 @@ def estimate_command(
         )
     )
     estimate_run = EstimateRun(config, out, workers=workers)
-    with Progress(console=err_console, transient=True) as bar:
+    with _transient_bar(err_console) as bar:
         task = bar.add_task(f"estimate ({method})", total=config.episodes)
         table = estimate_run.run(lambda done, total: bar.update(task, completed=done))
     summary = summarise(config, table, estimate_run.source.threshold)

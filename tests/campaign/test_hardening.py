@@ -105,6 +105,8 @@ def test_a_classifier_that_fails_costs_the_failure_its_class_not_the_run(
     assert set(failures["class"]) == {"other"}
     report = hazardhunt("report", tmp_path / "run")
     assert report.returncode == 0, report.stderr
+    # In a pipe, the report's one line and nothing before it (no progress bar's empty line).
+    assert report.stdout.startswith("report written to ")
 
 
 def test_the_summary_table_says_the_classifier_failed(tmp_path):

@@ -1,7 +1,9 @@
 """The `hazardhunt run` command: smoke run, JSON summary, bad input."""
 
+import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -10,7 +12,11 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from rich.console import Console
 
+import hazardhunt as hazardhunt_package
+from hazardhunt.campaign import run as run_module
+from hazardhunt.campaign.config import RunConfig
 from hazardhunt.world.scenario import load_scenario
 from tests.helpers import hazardhunt
 
@@ -54,10 +60,23 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
     config = json.loads((out / "config.json").read_text())
     assert config["run"]["seed"] == 3
     assert config["run"]["env"]["decision_period"] == 2.0
+    # The BLAS kernel numpy picked for this CPU: a search through BLAS draws by it.
+    assert config["blas"] == hazardhunt_package.blas_kernel() != "unknown"
     # Running the same command again keeps the finished run.
     again = hazardhunt("run", *run_args(out), "--json")
     assert again.returncode == 0
     assert json.loads(again.stdout)["finished_at"] == summary["finished_at"]
+
+
+def test_a_run_in_a_log_file_writes_lines_not_a_cut_off_bar(tmp_path, monkeypatch):
+    monkeypatch.setattr(run_module, "LOG_INTERVAL_S", 0.0)
+    log = io.StringIO()
+    config = RunConfig(scenario="head-on", field="2m", tester="random", seed=3, episodes=4)
+    run_module.execute_run(config, tmp_path / "run", Console(file=log, width=80))
+    lines = log.getvalue().splitlines()
+    last = r"head-on__2m__random__seed3: 4 of 4 episodes, \d+ failures, [\d.]+ episodes/s"
+    assert re.fullmatch(last, lines[-1]), lines
+    assert not any("━" in line or "…" in line for line in lines)
 
 
 def test_a_runs_cpu_time_counts_the_processes_it_started_once_they_end():

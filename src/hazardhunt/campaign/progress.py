@@ -18,10 +18,7 @@ from rich.table import Table
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
 from hazardhunt.campaign.records import CampaignSummary, LedgerEntry
-
-LOG_INTERVAL_S = 600.0
-"""Time between two progress lines when the campaign's output is not a terminal (a log file,
-where progress bars do not show), in s; every run that ends writes one too."""
+from hazardhunt.campaign.run import LOG_INTERVAL_S
 
 
 class ProgressDisplay:
@@ -40,7 +37,8 @@ class ProgressDisplay:
         ledger: The campaign's runs and how they stand.
         pending: The runs about to be executed.
         show_episodes: Whether the episodes done are counted (not with Ray).
-        log: Where a line of progress goes every ``LOG_INTERVAL_S`` and at each run's end,
+        log: Where a line of progress goes every ``LOG_INTERVAL_S`` (the time between two
+            progress lines where the output is not a terminal) and at each run's end,
             for output that is not a terminal; None for none.
         """
         complete = [e for e in ledger.entries.values() if e["status"] == "complete"]

@@ -172,6 +172,7 @@ def record_run(
             "hazardhunt_version": hazardhunt.__version__,
             "source_digest": hazardhunt.source_digest(),
             "python": platform.python_version(),
+            "blas": hazardhunt.blas_kernel(),
             "physics_step": simulation.physics_step,
             "control_period": simulation.controller.control_period,
             "field_shape": asdict(simulation.field),
@@ -442,7 +443,14 @@ def make_directory(path: Path, option: str) -> None:
         raise ConfigError(f"{option}: cannot create {path}: {error.strerror or error}") from None
 
 
+LOG_INTERVAL_S = 600.0
+"""Time between two progress lines where the output is not a terminal (a log file, where
+progress bars do not show), in s."""
+
+
 def _with_progress(config: RunConfig, out: Path, console: Console) -> RunSummary:
+    """Execute the run with a progress bar on a terminal, or else a line every
+    ``LOG_INTERVAL_S``."""
     columns = (
         TextColumn(f"{config.run_id}"),
         BarColumn(),
@@ -454,11 +462,12 @@ def _with_progress(config: RunConfig, out: Path, console: Console) -> RunSummary
         TimeElapsedColumn(),
         TimeRemainingColumn(),
     )
-    progress = Progress(*columns, console=console, transient=False)
+    progress = Progress(*columns, console=console, disable=not console.is_terminal)
     task: TaskID | None = None
+    logged_at = time.monotonic()
 
     def update(state: RunProgress) -> None:
-        nonlocal task
+        nonlocal task, logged_at
         if task is None:  # the run has started: the bar stays off an error in its settings
             progress.start()
             task = progress.add_task(
@@ -473,6 +482,12 @@ def _with_progress(config: RunConfig, out: Path, console: Console) -> RunSummary
             failures=state.failures,
             sut_errors=sut_errors,
         )
+        if progress.disable and time.monotonic() - logged_at >= LOG_INTERVAL_S:
+            logged_at = time.monotonic()
+            console.print(
+                f"{config.run_id}: {state.episodes_done:,} of {config.episodes:,} episodes, "
+                f"{state.failures:,} failures{sut_errors}, {rate:.1f} episodes/s"
+            )
 
     try:
         return execute_run_atomically(config, out, update)
