@@ -505,6 +505,12 @@ def campaign(
     if address is not None and executor != "ray":
         raise typer.BadParameter("only with --executor ray", param_hint="--address")
     config = load_campaign(file, _plugin("--classifier", classifier, classifier_param))
+    for name in config.unused_tester_tables:
+        err_console.print(
+            f"[yellow]warning:[/yellow] {escape(str(file))}: \\[tester.{escape(name)}] is not "
+            f"run (testers = {escape(str(config.testers))}): its settings are not used",
+            highlight=False,
+        )
     check_output_location(out)
     try:
         run_campaign(

@@ -234,6 +234,20 @@ def test_a_campaign_written_to_a_log_file_says_how_far_it_is(tmp_path: Path) -> 
     assert lines[-1].endswith(f"2 of 2 runs ended, {total:,} of {total:,} episodes (100%)")
 
 
+def test_settings_of_a_tester_the_campaign_does_not_run_are_pointed_out(tmp_path: Path) -> None:
+    file, out = tmp_path / "one-seed.toml", tmp_path / "campaign"
+    settings = '[tester.qd]\nemitters = 2\n[tester.cem-aim]\nmethod = "cem"\n'
+    file.write_text(GRID.replace("seeds = [0, 1]", "seeds = [0]") + settings)
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == [
+        f"warning: {file}: [tester.{name}] is not run (testers = ['random']): its settings "
+        "are not used"
+        for name in ("qd", "cem-aim")
+    ]
+
+
 def test_a_slice_written_to_a_log_file_counts_its_own_runs(tmp_path: Path) -> None:
     file, out = tmp_path / "two-seeds.toml", tmp_path / "campaign"
     file.write_text(GRID)

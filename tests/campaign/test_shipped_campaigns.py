@@ -24,6 +24,7 @@ def test_a_shipped_campaign_file_loads_with_its_grid(name, runs, episodes, teste
     assert len(config.runs()) == runs
     assert config.episodes == episodes
     assert set(config.testers) == testers
+    assert config.unused_tester_tables == []  # every tester's settings reach its runs
 
 
 def test_every_shipped_campaign_file_is_tested():

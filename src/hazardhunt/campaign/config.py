@@ -473,6 +473,13 @@ class CampaignConfig(_Strict):
         self._check_run_ids()
         return self
 
+    @property
+    def unused_tester_tables(self) -> list[str]:
+        """The names of ``[tester.NAME]`` tables whose tester ``testers`` does not list: their
+        settings reach no run (a tester taken out of the list for now, or a misspelt entry)."""
+        tables = [*self.tester, *self.tester_plugins]
+        return [name for name in dict.fromkeys(tables) if name not in self.testers]
+
     def _check_run_ids(self) -> None:
         """Raises a validation error naming the key of two names that give one run id."""
         seen: dict[str, tuple[str, str, str]] = {}
