@@ -43,7 +43,8 @@ from hazardhunt.benchmark.held_out import HELD_OUT_MUTANTS
 from hazardhunt.campaign.config import PluginSpec, RunConfig
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import write_json_atomic
-from hazardhunt.world.scenario import BUILTIN_SCENARIOS, format_validation_error
+from hazardhunt.textfiles import format_validation_error
+from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 MODULES = {
     cls.__name__: cls.__module__ for cls in (ConservativeController, *MUTANTS, *HELD_OUT_MUTANTS)

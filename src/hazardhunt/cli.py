@@ -881,7 +881,7 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
 def _validated(build: Callable[[], T]) -> T:
     from pydantic import ValidationError
 
-    from hazardhunt.world.scenario import format_validation_error
+    from hazardhunt.textfiles import format_validation_error
 
     try:
         return build()

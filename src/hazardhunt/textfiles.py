@@ -1,10 +1,17 @@
 """Reading TOML that anyone may have written: a file nested too deeply for the parser is a
-decoding error that names the problem, never a ``RecursionError``."""
+decoding error that names the problem, never a ``RecursionError``; a value the file's schema
+refuses is one line in the file's own words (:func:`format_validation_error`)."""
 
 from __future__ import annotations
 
+import difflib
+import re
 import sys
+import types
+import typing
 from typing import Any
+
+from pydantic import BaseModel, ValidationError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -28,3 +35,91 @@ def loads_toml(text: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except RecursionError:
         raise TomlTooDeepError("arrays or tables nested too deeply") from None
+
+
+_KINDS = {
+    "int_type": "a whole number",
+    "int_parsing": "a whole number",
+    "int_from_float": "a whole number",
+    "float_type": "a number",
+    "float_parsing": "a number",
+    "bool_type": "true or false",
+    "bool_parsing": "true or false",
+    "string_type": "text",
+    "list_type": "a list",
+    "tuple_type": "a list",
+    "dict_type": "a table",
+    "model_type": "a table",
+    "model_attributes_type": "a table",
+}
+"""Per pydantic error type, the kind of value it wanted, in a TOML file's words."""
+
+
+def format_validation_error(error: ValidationError, model: type[BaseModel] | None = None) -> str:
+    """The first problem of a pydantic error as ``key: message`` in a TOML file's words (and
+    how many more): ``episods: unknown key (did you mean episodes?)``, ``seeds.0: must be a
+    whole number, not 0.5``, ``episodes: missing``.
+
+    Args:
+        error: What validating ``model`` (or another schema) raised.
+        model: The schema validated, whose keys an unknown key is matched against.
+    """
+    first = error.errors()[0]
+    # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
+    location = [part for part in first["loc"] if part != "[key]"]
+    key = ".".join(str(part) for part in location) or "(top level)"
+    kind, value = first["type"], first.get("input")
+    if kind == "extra_forbidden":
+        known = _keys_at(model, location[:-1]) if model and location else []
+        close = difflib.get_close_matches(str(location[-1]), known, n=1) if location else []
+        message = "unknown key" + (f" (did you mean {close[0]}?)" if close else "")
+    elif kind == "missing":
+        message = "missing"
+    elif kind in _KINDS:
+        message = f"must be {_KINDS[kind]}, not {_shown(value)}"
+    elif kind == "too_short" and (first.get("ctx") or {}).get("min_length") == 1:
+        message = "must not be empty"
+    else:
+        message = str(first["msg"]).removeprefix("Value error, ")
+        # "Input should be greater than 0", "Tuple should have at most 2 items"
+        message = re.sub(r"^(Input|List|Tuple|String|Dictionary) should ", "must ", message)
+    more = error.error_count() - 1
+    problems = "problem" if more == 1 else "problems"
+    return f"{key}: {message}" + (f" (and {more} more {problems})" if more else "")
+
+
+def _shown(value: Any) -> str:
+    """A value as a TOML file writes it, cut short."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = f'"{value}"'
+    elif isinstance(value, dict):
+        text = "a table"
+    else:
+        text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _keys_at(model: type[BaseModel], path: list[int | str]) -> list[str]:
+    """The keys of the table at ``path`` in ``model``'s schema (none where the path leaves the
+    schema's nested models: a list, a free table)."""
+    current: type[BaseModel] = model
+    for part in path:
+        field = current.model_fields.get(str(part))
+        nested = [
+            kind
+            for kind in _alternatives(field.annotation if field else None)
+            if isinstance(kind, type) and issubclass(kind, BaseModel)
+        ]
+        if not nested:
+            return []
+        current = nested[0]
+    return list(current.model_fields)
+
+
+def _alternatives(annotation: Any) -> tuple[Any, ...]:
+    """The types an annotation allows (``A | None``: ``A`` and ``None``)."""
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        return typing.get_args(annotation)
+    return (annotation,)

@@ -305,7 +305,7 @@ def test_ray_records_the_same_episodes_as_local(
         ),
         pytest.param(
             GRID + "[env]\ndecision_period = inf\n",
-            "env.decision_period: Input should be a finite number",
+            "env.decision_period: must be a finite number",
             id="infinite-decision-period",
         ),
         pytest.param(
@@ -315,7 +315,7 @@ def test_ray_records_the_same_episodes_as_local(
         ),
         pytest.param(
             GRID + "[env]\nepisode_duration = nan\n",
-            "env.episode_duration: Input should be a finite number",
+            "env.episode_duration: must be a finite number",
             id="nan-duration",
         ),
         pytest.param(
@@ -351,12 +351,12 @@ def test_ray_records_the_same_episodes_as_local(
         # Values of another type are refused, not coerced.
         pytest.param(
             GRID.replace(f"= {EPISODES}", "= true"),
-            "episodes: Input should be a valid integer",
+            "episodes: must be a whole number, not true",
             id="boolean-episodes",
         ),
         pytest.param(
             GRID.replace("[0, 1]", '["0", "1"]'),
-            "seeds.0: Input should be a valid integer",
+            'seeds.0: must be a whole number, not "0"',
             id="string-seeds",
         ),
     ],

@@ -346,7 +346,7 @@ def test_a_tester_that_plays_less_than_its_budget_fails_its_run(tmp_path):
     ("option", "value", "problem"),
     [
         ("--robot", "length=1e6", "length must be at most 10"),
-        ("--stall-duration", "1e-300", "stall_duration: Input should be greater than or equal"),
+        ("--stall-duration", "1e-300", "stall_duration: must be greater than or equal"),
         ("--field", "3m", "unknown field '3m': use one of none, 1.25m, 2m"),
     ],
 )

@@ -94,7 +94,7 @@ def test_a_runs_cpu_time_counts_the_processes_it_started_once_they_end():
         ({"scenario": "roundabout"}, "scenario: unknown scenario 'roundabout'"),
         ({"field": "3m"}, "field: unknown field '3m'"),
         ({"tester": "genetic"}, "tester: unknown tester 'genetic'"),
-        ({"episodes": 0}, "episodes: Input should be greater than 0"),
+        ({"episodes": 0}, "episodes: must be greater than 0"),
         ({"tester-param": "n_envs"}, "'n_envs' is not KEY=VALUE"),
         (
             {"tester": "ppo-max", "tester-param": "n_env=2"},
@@ -103,7 +103,7 @@ def test_a_runs_cpu_time_counts_the_processes_it_started_once_they_end():
         # Settings that passed the first check and failed once the run had started.
         ({"decision-period": 0.07}, "env.decision_period: 0.07 s is not a whole multiple"),
         ({"decision-period": 0.3}, "env.decision_period: 0.3 s is not a whole multiple"),
-        ({"decision-period": "inf"}, "decision_period: Input should be a finite number"),
+        ({"decision-period": "inf"}, "decision_period: must be a finite number"),
         ({"decision-period": "1e9"}, "decision_period: 1e+09 s is longer than an episode"),
         ({"tester-param": "attemps=3"}, "tester_params.attemps: unknown parameter"),
         ({"tester-param": "attempts=many"}, "tester_params.attempts: must be a whole number"),
@@ -186,12 +186,12 @@ start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
     [
         pytest.param(
             ("heading_deg = 90.0", "heading_deg = nan"),
-            "human.start.heading_deg: Input should be a finite number",
+            "human.start.heading_deg: must be a finite number",
             id="nan-heading",
         ),
         pytest.param(
             ("y = 10.0, heading", "y = inf, heading"),
-            "robot.start.y: Input should be a finite number",
+            "robot.start.y: must be a finite number",
             id="inf-position",
         ),
         pytest.param(

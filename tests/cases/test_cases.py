@@ -122,27 +122,27 @@ def drop(table, key):
         ),
         pytest.param(
             lambda case: case["human"]["actions"].__setitem__(1, [0.5, 0.0, 1.0]),
-            "human.actions.1: Tuple should have at most 2 items",
+            "human.actions.1: must have at most 2 items",
             id="three-numbers-in-an-action",
         ),
         pytest.param(
             lambda case: case["human"]["actions"][0].__setitem__(1, "left"),
-            "human.actions.0.1: Input should be a valid number",
+            'human.actions.0.1: must be a number, not "left"',
             id="text-in-an-action",
         ),
         pytest.param(
             lambda case: case["human"].__setitem__("actions", []),
-            "human.actions: List should have at least 1 item",
+            "human.actions: must not be empty",
             id="no-actions",
         ),
         pytest.param(
             lambda case: case["environment"].__setitem__("seed", "zero"),
-            "environment.seed: Input should be a valid integer",
+            'environment.seed: must be a whole number, not "zero"',
             id="bad-seed",
         ),
         pytest.param(
             lambda case: case["environment"].__setitem__("seed", -4),
-            "environment.seed: Input should be greater than or equal to 0",
+            "environment.seed: must be greater than or equal to 0",
             id="negative-seed",
         ),
         pytest.param(
@@ -152,22 +152,22 @@ def drop(table, key):
         ),
         pytest.param(
             lambda case: case["expected"].__setitem__("sim_time", "7.2"),
-            "expected.sim_time: Input should be a valid number",
+            'expected.sim_time: must be a number, not "7.2"',
             id="time-as-text",
         ),
         pytest.param(
             lambda case: case["expected"].__setitem__("class", ["side-left/no-stop"]),
-            "expected.class: Input should be a valid string",
+            "expected.class: must be text, not ['side-left/no-stop']",
             id="class-not-text",
         ),
         pytest.param(
             lambda case: case["environment"].__setitem__("decision_period", -2.0),
-            "environment.decision_period: Input should be greater than 0",
+            "environment.decision_period: must be greater than 0",
             id="negative-decision-period",
         ),
         pytest.param(
             lambda case: case["environment"].__setitem__("episode_lenght", 30.0),
-            "environment.episode_lenght: Extra inputs are not permitted",
+            "environment.episode_lenght: unknown key (did you mean episode_duration?)",
             id="unknown-key",
         ),
         pytest.param(
@@ -182,7 +182,7 @@ def drop(table, key):
         ),
         pytest.param(
             lambda case: drop(case["scenario"]["robot"], "goal"),
-            "[scenario]: robot.goal: Field required",
+            "[scenario]: robot.goal: missing",
             id="scenario-without-goal",
         ),
     ],

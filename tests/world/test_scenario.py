@@ -62,9 +62,9 @@ def test_a_user_scenario_file_loads(tmp_path):
         (("name = ", "name = = "), "not valid TOML"),
         (
             ("heading_deg = 90.0", "heading_deg = nan"),
-            "human.start.heading_deg: Input should be a finite",
+            "human.start.heading_deg: must be a finite",
         ),
-        (("x = 2.0, y = 10.0", "x = -inf, y = 10.0"), "robot.start.x: Input should be a finite"),
+        (("x = 2.0, y = 10.0", "x = -inf, y = 10.0"), "robot.start.x: must be a finite"),
     ],
 )
 def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):
@@ -128,7 +128,7 @@ def map_file(tmp_path, table, polygon):
         (
             "obstacles",
             "[[0, 0], [1, 0], [1, nan]]",
-            "obstacles.0.polygon.2.1: Input should be a finite number",
+            "obstacles.0.polygon.2.1: must be a finite number",
         ),
     ],
 )
@@ -147,7 +147,7 @@ def test_a_map_of_no_finite_size_names_the_key(tmp_path, size, key):
     )
     with pytest.raises(ScenarioError) as caught:
         load_scenario(write(tmp_path, VALID.replace(SHOPFLOOR, "map.toml")))
-    assert f"map.toml: {key}: Input should be a finite number" in str(caught.value)
+    assert f"map.toml: {key}: must be a finite number" in str(caught.value)
 
 
 def round_column(vertices: int) -> list[list[float]]:

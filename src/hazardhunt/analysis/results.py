@@ -24,7 +24,7 @@ from hazardhunt.spec.failure_classes import (
 )
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.registry import sort_testers
-from hazardhunt.world.scenario import format_validation_error
+from hazardhunt.textfiles import format_validation_error
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""

@@ -47,13 +47,12 @@ from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
-from hazardhunt.textfiles import loads_toml
+from hazardhunt.textfiles import format_validation_error, loads_toml
 from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.scenario import (
     BUILTIN_SCENARIOS,
     Scenario,
     ScenarioError,
-    format_validation_error,
     load_scenario,
 )
 
@@ -636,7 +635,7 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
     try:
         config = CampaignConfig.model_validate(data)
     except ValidationError as error:
-        raise ConfigError(f"{path}: {format_validation_error(error)}") from error
+        raise ConfigError(f"{path}: {format_validation_error(error, CampaignConfig)}") from error
     try:
         check_plugins(config)
     except ConfigError as error:

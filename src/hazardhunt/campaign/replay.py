@@ -27,7 +27,7 @@ from hazardhunt.campaign.store import find_damage
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
-from hazardhunt.world.scenario import format_validation_error
+from hazardhunt.textfiles import format_validation_error
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""

@@ -47,12 +47,8 @@ from hazardhunt.spec.outcomes import Outcome
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.testers.objective import violation_class
-from hazardhunt.textfiles import loads_toml
-from hazardhunt.world.scenario import (
-    ScenarioError,
-    format_validation_error,
-    scenario_from_data,
-)
+from hazardhunt.textfiles import format_validation_error, loads_toml
+from hazardhunt.world.scenario import ScenarioError, scenario_from_data
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -321,24 +317,7 @@ def _read_case(path: Path) -> _Case:
     try:
         return _Case.model_validate(data)
     except ValidationError as error:
-        raise CaseError(f"{path}: {_problem(error)}") from None
-
-
-_IN_TOML_WORDS = {
-    "missing": "missing",
-    "model_type": "must be a table",
-    "dict_type": "must be a table",
-}
-"""pydantic's messages that read better in a TOML file's words, by error type."""
-
-
-def _problem(error: ValidationError) -> str:
-    """The first problem as ``key: message`` (``format_validation_error``), in TOML's words."""
-    first = error.errors()[0]
-    problem = format_validation_error(error)
-    if first["type"] in _IN_TOML_WORDS:
-        problem = problem.replace(f": {first['msg']}", f": {_IN_TOML_WORDS[first['type']]}", 1)
-    return problem
+        raise CaseError(f"{path}: {format_validation_error(error, _Case)}") from None
 
 
 def _allowed(

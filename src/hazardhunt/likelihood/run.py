@@ -49,7 +49,7 @@ from hazardhunt.likelihood.people import load_model
 from hazardhunt.likelihood.splitting import SplittingPlanner
 from hazardhunt.likelihood.uncertainty import load_uncertainties
 from hazardhunt.processes import die_with_parent
-from hazardhunt.world.scenario import format_validation_error
+from hazardhunt.textfiles import format_validation_error
 
 WALKING_PERIOD = 0.2
 """The decision period of an estimate's human (s): a walker steers every control period."""
@@ -335,7 +335,7 @@ def load_config(directory: Path) -> EstimateConfig:
     except OSError as error:
         raise InputError(f"{directory}: no estimate here ({error.strerror}: {path.name})") from None
     except ValidationError as error:
-        raise InputError(f"{path}: {format_validation_error(error)}") from None
+        raise InputError(f"{path}: {format_validation_error(error, EstimateConfig)}") from None
 
 
 # A worker process's encounters, built once when the process starts.

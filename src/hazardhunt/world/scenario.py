@@ -22,7 +22,7 @@ from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
 from hazardhunt.errors import InputError
-from hazardhunt.textfiles import loads_toml
+from hazardhunt.textfiles import format_validation_error, loads_toml
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
 
@@ -194,7 +194,7 @@ def scenario_from_data(data: dict[str, Any], source: str) -> Scenario:
     try:
         spec = _ScenarioSpec.model_validate(data)
     except ValidationError as error:
-        raise ScenarioError(f"{source}: {format_validation_error(error)}") from error
+        raise ScenarioError(f"{source}: {format_validation_error(error, _ScenarioSpec)}") from error
     if isinstance(spec.map, str):
         raise ScenarioError(f"{source}: map: must be an inline table here, not a file name")
     return _build_scenario(spec, _build_floor(spec.map), Path(source))
@@ -228,17 +228,7 @@ def _parse(path: Path, model: type[_Strict]) -> Any:
     try:
         return model.model_validate(data)
     except ValidationError as error:
-        raise ScenarioError(f"{path}: {format_validation_error(error)}") from error
-
-
-def format_validation_error(error: ValidationError) -> str:
-    """The first problem of a pydantic error as ``field: message`` (and how many more)."""
-    first = error.errors()[0]
-    # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
-    field = ".".join(str(part) for part in first["loc"] if part != "[key]") or "(top level)"
-    message = str(first["msg"]).removeprefix("Value error, ")
-    more = error.error_count() - 1
-    return f"{field}: {message}" + (f" (and {more} more problems)" if more else "")
+        raise ScenarioError(f"{path}: {format_validation_error(error, model)}") from error
 
 
 def _pose(spec: _PoseSpec) -> Pose:
