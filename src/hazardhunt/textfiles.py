@@ -9,9 +9,11 @@ import re
 import sys
 import types
 import typing
+from collections.abc import Sequence
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
+from pydantic_core import ErrorDetails
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -68,24 +70,31 @@ def format_validation_error(error: ValidationError, model: type[BaseModel] | Non
     # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
     location = [part for part in first["loc"] if part != "[key]"]
     key = ".".join(str(part) for part in location) or "(top level)"
-    kind, value = first["type"], first.get("input")
-    if kind == "extra_forbidden":
-        known = _keys_at(model, location[:-1]) if model and location else []
+    if first["type"] == "extra_forbidden":
+        known = schema_keys(model, location[:-1]) if model and location else []
         close = difflib.get_close_matches(str(location[-1]), known, n=1) if location else []
         message = "unknown key" + (f" (did you mean {close[0]}?)" if close else "")
-    elif kind == "missing":
-        message = "missing"
-    elif kind in _KINDS:
-        message = f"must be {_KINDS[kind]}, not {_shown(value)}"
-    elif kind == "too_short" and (first.get("ctx") or {}).get("min_length") == 1:
-        message = "must not be empty"
     else:
-        message = str(first["msg"]).removeprefix("Value error, ")
-        # "Input should be greater than 0", "Tuple should have at most 2 items"
-        message = re.sub(r"^(Input|List|Tuple|String|Dictionary) should ", "must ", message)
+        message = refused_value(first)
     more = error.error_count() - 1
     problems = "problem" if more == 1 else "problems"
     return f"{key}: {message}" + (f" (and {more} more {problems})" if more else "")
+
+
+def refused_value(problem: ErrorDetails) -> str:
+    """What is wrong with a value, from one problem of a pydantic error, in a TOML file's
+    words: ``must be a whole number, not "2"``, ``missing``, ``must not be empty``, ``must be
+    greater than 0``, or the message of a check of the schema's own."""
+    kind, value = problem["type"], problem.get("input")
+    if kind == "missing":
+        return "missing"
+    if kind in _KINDS:
+        return f"must be {_KINDS[kind]}, not {_shown(value)}"
+    if kind == "too_short" and (problem.get("ctx") or {}).get("min_length") == 1:
+        return "must not be empty"
+    message = str(problem["msg"]).removeprefix("Value error, ")
+    # "Input should be greater than 0", "Tuple should have at most 2 items"
+    return re.sub(r"^(Input|List|Tuple|String|Dictionary) should ", "must ", message)
 
 
 def _shown(value: Any) -> str:
@@ -101,7 +110,7 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _keys_at(model: type[BaseModel], path: list[int | str]) -> list[str]:
+def schema_keys(model: type[BaseModel], path: Sequence[int | str]) -> list[str]:
     """The keys of the table at ``path`` in ``model``'s schema (none where the path leaves the
     schema's nested models: a list, a free table)."""
     current: type[BaseModel] = model

@@ -29,6 +29,7 @@ from hazardhunt.testers.base import EpisodeRecorder, TesterParameterError
 from hazardhunt.testers.evaluator import MAX_WORKER_PROCESSES, EpisodeEvaluator, Plan
 from hazardhunt.testers.objective import CONTACT, Objective
 from hazardhunt.testers.spaces import SearchSpace
+from hazardhunt.textfiles import refused_value, schema_keys
 
 
 @runtime_checkable
@@ -124,30 +125,21 @@ def parse_params(tester: str, model: type[ParamsT], params: Mapping[str, Any]) -
     except ValidationError as error:
         first = error.errors()[0]
         location = [str(part) for part in first["loc"]]
-        message = first["msg"].removeprefix("Value error, ").replace("Input should be", "must be")
+        message = refused_value(first)
         key, separator, rest = message.partition(": ")
         if not location and separator and " " not in key:  # a check of several settings
             raise TesterParameterError(tester, key, rest) from None
         key = ".".join(location) or next(iter(params), "parameters")
         if first["type"] == "extra_forbidden":
-            known = ", ".join(_fields_at(model, location[:-1]))
+            known = ", ".join(schema_keys(model, location[:-1]))
             problem = f"unknown parameter; the tester takes {known}"
             if len(location) > 1:
                 problem = f"unknown setting of {'.'.join(location[:-1])}, which takes {known}"
             raise TesterParameterError(tester, key, problem) from None
-        if first["type"] != "value_error" and not isinstance(first["input"], dict | list):
+        scalar = not isinstance(first["input"], dict | list)
+        if first["type"] != "value_error" and ", not " not in message and scalar:  # a range
             message += f", not {first['input']!r}"
         raise TesterParameterError(tester, key, message) from None
-
-
-def _fields_at(model: type[BaseModel], location: list[str]) -> list[str]:
-    """The settings of the model nested at ``location`` in ``model``."""
-    for name in location:
-        annotation = model.model_fields[name].annotation if name in model.model_fields else None
-        if not (isinstance(annotation, type) and issubclass(annotation, BaseModel)):
-            return []
-        model = annotation
-    return list(model.model_fields)
 
 
 @dataclass(frozen=True)
