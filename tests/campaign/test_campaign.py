@@ -232,6 +232,9 @@ def test_a_campaign_written_to_a_log_file_says_how_far_it_is(tmp_path: Path) -> 
     assert all(" complete: " in line for line in lines)
     total = 2 * EPISODES
     assert lines[-1].endswith(f"2 of 2 runs ended, {total:,} of {total:,} episodes (100%)")
+    # No progress bar either, cut off at the end of the log.
+    bars = [line for line in result.stdout.splitlines() if line.lstrip().startswith("runs ━")]
+    assert bars == []
 
 
 def test_settings_of_a_tester_the_campaign_does_not_run_are_pointed_out(tmp_path: Path) -> None:

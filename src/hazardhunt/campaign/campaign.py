@@ -253,10 +253,11 @@ def _execute(
         TextColumn("left"),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, console=console, disable=console is None) as progress:
+    on_terminal = console is not None and console.is_terminal
+    with Progress(*columns, console=console, disable=not on_terminal) as progress:
         # Ray reports a run only once it is done, so only the local executor counts episodes.
         log = None
-        if console is not None and not console.is_terminal:
+        if console is not None and not on_terminal:  # a log file: lines instead of bars
             log = functools.partial(console.print, markup=False, highlight=False, soft_wrap=True)
         display = ProgressDisplay(
             progress, ledger, pending, show_episodes=executor == "local", log=log
