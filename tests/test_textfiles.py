@@ -26,6 +26,7 @@ class Scenario(_Strict):
     episodes: int = 1
     label: str = ""
     on: bool = False
+    kind: str = Field(default="", alias="class")
 
 
 @pytest.mark.parametrize(
@@ -41,6 +42,8 @@ class Scenario(_Strict):
         ({"seeds": [0.5]}, "seeds.0: must be a whole number, not 0.5"),
         ({"seeds": []}, "seeds: must not be empty"),
         ({"seeds": "0"}, 'seeds: must be a list, not "0"'),
+        ({"label": ["a", 1, True]}, 'label: must be text, not ["a", 1, true]'),
+        ({"clas": 1}, "clas: unknown key (did you mean class?)"),
         ({"robot": 3}, "robot: must be a table, not 3"),
         ({"label": {"a": 1}}, "label: must be text, not a table"),
         ({"on": "yes"}, 'on: must be true or false, not "yes"'),

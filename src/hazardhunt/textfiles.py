@@ -105,6 +105,8 @@ def _shown(value: Any) -> str:
         text = f'"{value}"'
     elif isinstance(value, dict):
         text = "a table"
+    elif isinstance(value, list | tuple):
+        text = "[" + ", ".join(_shown(item) for item in value) + "]"
     else:
         text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."
@@ -115,7 +117,8 @@ def schema_keys(model: type[BaseModel], path: Sequence[int | str]) -> list[str]:
     schema's nested models: a list, a free table)."""
     current: type[BaseModel] = model
     for part in path:
-        field = current.model_fields.get(str(part))
+        fields = {field.alias or name: field for name, field in current.model_fields.items()}
+        field = fields.get(str(part))
         nested = [
             kind
             for kind in _alternatives(field.annotation if field else None)
@@ -124,7 +127,7 @@ def schema_keys(model: type[BaseModel], path: Sequence[int | str]) -> list[str]:
         if not nested:
             return []
         current = nested[0]
-    return list(current.model_fields)
+    return [field.alias or name for name, field in current.model_fields.items()]
 
 
 def _alternatives(annotation: Any) -> tuple[Any, ...]:

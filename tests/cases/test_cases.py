@@ -157,7 +157,7 @@ def drop(table, key):
         ),
         pytest.param(
             lambda case: case["expected"].__setitem__("class", ["side-left/no-stop"]),
-            "expected.class: must be text, not ['side-left/no-stop']",
+            'expected.class: must be text, not ["side-left/no-stop"]',
             id="class-not-text",
         ),
         pytest.param(

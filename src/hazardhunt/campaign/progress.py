@@ -37,8 +37,7 @@ class ProgressDisplay:
         ledger: The campaign's runs and how they stand.
         pending: The runs about to be executed.
         show_episodes: Whether the episodes done are counted (not with Ray).
-        log: Where a line of progress goes every ``LOG_INTERVAL_S`` (the time between two
-            progress lines where the output is not a terminal) and at each run's end,
+        log: Where a line of progress goes every ``LOG_INTERVAL_S`` and at each run's end,
             for output that is not a terminal; None for none.
         """
         complete = [e for e in ledger.entries.values() if e["status"] == "complete"]
