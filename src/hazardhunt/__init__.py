@@ -52,11 +52,11 @@ def blas_kernel() -> str:
     libraries = [info for info in threadpool_info() if info.get("user_api") == "blas"]
     # A wheel's library sits in numpy.libs; scipy's own may be loaded beside it.
     numpys = [info for info in libraries if "numpy" in Path(info["filepath"]).parent.name]
-    if not numpys + libraries:
+    chosen = numpys or libraries
+    if not chosen:
         return "unknown"
-    library = (numpys + libraries)[0]
     keys = ("internal_api", "version", "architecture")
-    return " ".join(str(library[key]) for key in keys if library.get(key))
+    return " ".join(str(chosen[0][key]) for key in keys if chosen[0].get(key))
 
 
 __all__ = ["ENV_ID", "__version__", "blas_kernel", "source_digest"]
