@@ -116,14 +116,23 @@ def shown_scenario(scenario: str) -> str:
 
 
 def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) -> None:
-    """Per scenario x field x tester: failures of the run, or over seeds their mean ± std, and
-    the mean wall time."""
+    """Per scenario x field x tester with a run that ended (complete or failed): failures of
+    the run, or over seeds their mean ± std, and the mean wall time. Groups none of whose runs
+    has been run yet are counted below the table, not listed: a slice of a large grid shows its
+    own rows."""
     groups: dict[tuple[str, str, str], list[LedgerEntry]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
         groups.setdefault(key, []).append(entry)
+    not_started = {
+        key: entries
+        for key, entries in groups.items()
+        if all(entry["status"] == "pending" for entry in entries)
+    }
     table = Table("scenario", "field", "tester", "runs", "failures", "SUT errors", "wall time (s)")
     for (scenario, field, tester), entries in groups.items():
+        if (scenario, field, tester) in not_started:
+            continue
         complete = [e for e in entries if e["status"] == "complete"]
         failures = [int(e["failures"]) for e in complete]
         sut_errors = sum(int(e.get("sut_errors", 0)) for e in complete)
@@ -157,9 +166,16 @@ def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) 
             "run the same command again to retry them"
         )
     if summary["runs_pending"]:
+        groups_word = "group" if len(not_started) == 1 else "groups"
+        unlisted = (
+            f" (the table leaves out {len(not_started)} scenario x field x tester "
+            f"{groups_word} none of whose runs has run)"
+            if not_started
+            else ""
+        )
         console.print(
-            f"{summary['runs_pending']} runs not run yet: run the campaign again (with other "
-            "--runs patterns, or without) to run them"
+            f"{summary['runs_pending']} runs not run yet{unlisted}: run the campaign again "
+            "(with other --runs patterns, or without) to run them"
         )
 
 
