@@ -27,4 +27,4 @@ def test_reports_finishing_at_once_take_turns_and_leave_one_whole_report(tmp_pat
         thread.join()
     assert errors == []
     assert (final / "index.html").read_text().endswith(" 99")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".report.lock", "report"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]

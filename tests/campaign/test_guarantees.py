@@ -171,7 +171,7 @@ def test_a_second_run_into_the_same_out_is_refused_while_the_first_runs(
         second = hazardhunt(*run_args(out, 1), "--json")
         assert second.returncode == 2
         [line] = second.stderr.strip().splitlines()
-        assert "another run" in line
+        assert f"another run (pid {first.pid})" in line
         assert str(out) in line
     finally:
         release.touch()
@@ -179,6 +179,7 @@ def test_a_second_run_into_the_same_out_is_refused_while_the_first_runs(
     assert first.returncode == 0, errors
     assert json.loads((out / "config.json").read_text())["run"]["seed"] == 0
     assert not leftovers(tmp_path)
+    assert not (tmp_path / ".run.lock").exists()
     # The finished run is not taken for the other seed's.
     again = hazardhunt(*run_args(out, 1))
     assert again.returncode == 2
@@ -367,6 +368,5 @@ def test_a_report_that_cannot_be_written_leaves_the_previous_one_and_nothing_els
     report_on_a_full_disk()
     assert index.is_file()
     assert {p: p.read_bytes() for p in (out / "report").rglob("*") if p.is_file()} == before
-    # Nothing of the failed report is left; the lock that complete reports take stays.
-    left = sorted(p.name for p in out.iterdir() if p.name.startswith(".report"))
-    assert left == [".report.lock"]
+    # Nothing of the failed report is left, nor of the lock under which reports take turns.
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".report")) == []

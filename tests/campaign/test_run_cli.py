@@ -140,10 +140,11 @@ def test_a_run_killed_midway_is_redone_from_scratch(tmp_path):
     out = tmp_path / "run"
     partial = tmp_path / ".run.partial"
     partial.mkdir()
-    (partial / "config.json").write_text("{}")  # what a killed run leaves behind
+    (partial / "config.json").write_text("{}")  # what a killed run leaves behind,
+    (tmp_path / ".run.lock").write_text("999999999\n")  # and the file of its lock
     done = hazardhunt("run", *run_args(out), "--json")
     assert done.returncode == 0, done.stderr
-    assert not partial.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
     assert len(pd.read_parquet(out / "episodes.parquet")) == 4
 
 

@@ -6,7 +6,8 @@ Layout of a campaign directory::
     runs/<run_id>/             one complete run directory each (see ``hazardhunt.campaign.store``)
     runs/.<run_id>.partial     a run in progress; deleted and redone when the campaign resumes
     summary.json               per run its summary, or its error; rewritten after each run
-    .lock                      held (``flock``) by the one campaign process writing the directory
+    .lock                      held (``flock``) by the one campaign process writing the
+                               directory, there while it writes
 
 A run directory appears under its name only once the run is complete, so resuming is: keep the
 complete runs whose files match the checksums they recorded, delete the partial and damaged
