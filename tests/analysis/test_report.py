@@ -66,6 +66,22 @@ def test_the_summary_has_every_run_with_its_own_numbers(campaign, report):
         assert run["classes_found"] == own["classes_found"] <= run["classes_total"]
         assert run["wall_time_s"] == pytest.approx(own["wall_time_s"])
         assert run["episodes_per_s"] > 0
+        assert run["source_digest"] == own["source_digest"]
+        config = json.loads((campaign / "runs" / run["run_id"] / "config.json").read_text())
+        assert run["blas"] == config["blas"]
+
+
+def test_runs_recorded_by_different_sources_are_said_to_be(campaign, tmp_path):
+    copy = tmp_path / "campaign"
+    shutil.copytree(campaign, copy, ignore=shutil.ignore_patterns("report"))
+    older = sorted((copy / "runs").iterdir())[0] / "summary.json"
+    older.write_text(json.dumps(json.loads(older.read_text()) | {"source_digest": "0123456789ab"}))
+    page = report_module._Report(tmp_path / "report")
+    report_module._runs(page, load_results(copy))
+    [runs] = page.sections
+    said = " ".join(str(getattr(block, "text", "")) for block in runs.blocks)
+    assert "These runs were recorded by 2 different hazardhunt sources (0123456789ab, " in said
+    assert "BLAS kernels" not in said
 
 
 def test_lesson_1_counts_match_the_runs(campaign, report):

@@ -71,8 +71,11 @@ RUN_COLUMNS = (
     "wall_time_s",
     "cpu_time_s",
     "episodes_per_s",
+    "source_digest",
+    "blas",
 )
-"""What ``summary.json`` says about every run (SPEC 8)."""
+"""What ``summary.json`` says about every run (SPEC 8), and what ran it: the digest of
+hazardhunt's source and numpy's BLAS kernel (``config.json``)."""
 
 Progress = Callable[[str], None]
 """Told the name of each step of the report as it starts."""
@@ -592,8 +595,22 @@ def _decided_by(runs: pd.DataFrame, row: Any) -> str:
 
 
 def _runs(report: _Report, results: Results) -> None:
-    section = report.section("Runs", "Every finished run.")
+    section = report.section(
+        "Runs",
+        "Every finished run, with the digest of the hazardhunt source that ran it and numpy's "
+        "BLAS kernel (blank: not recorded).",
+    )
     report.table(section, "runs", results.runs[[c for c in RUN_COLUMNS if c in results.runs]])
+    for column, what in (("source_digest", "hazardhunt sources"), ("blas", "BLAS kernels")):
+        kinds = results.runs[column].dropna().unique() if column in results.runs else []
+        if len(kinds) > 1:
+            section.blocks.append(
+                Text(
+                    f"These runs were recorded by {len(kinds)} different {what} "
+                    f"({', '.join(sorted(map(str, kinds)))}): a run reproduces exactly only "
+                    "with its own (docs/design.md, Determinism)."
+                )
+            )
     if results.unfinished:
         section.blocks.append(
             Text(

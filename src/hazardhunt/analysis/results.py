@@ -123,6 +123,7 @@ def load_results_of(
     runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
     runs["directory"] = [str(path) for path in run_directories]
     runs["reward"] = [config.get("reward") for config in configs]
+    runs["blas"] = [config.get("blas") for config in configs]  # absent before 0.2
     runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
     tables = {
         name: _stacked(run_directories, summaries, f"{name}.parquet")
