@@ -44,6 +44,14 @@ def test_help_shows_the_defaults_written_in_brackets(subcommand: str, shown: str
     assert shown in " ".join(result.stdout.split())
 
 
+def test_the_list_of_commands_shows_each_summary_whole_on_its_row() -> None:
+    result = command("--help")
+    assert result.returncode == 0, result.stderr
+    rows = {line.split()[1]: line for line in result.stdout.splitlines() if line.startswith("│ ")}
+    assert "DIRECTORY/report (for an estimate: its probabilities, convergence" in rows["report"]
+    assert "a floor map and a scenario to edit, a campaign file" in rows["new-sut"]
+
+
 def test_new_sut_writes_a_starting_point_and_refuses_a_folder_in_use(tmp_path: Path) -> None:
     folder = tmp_path / "my_robot"
     result = command("new-sut", folder)

@@ -6,6 +6,7 @@ texts: the commands only read their options and call the packages below, which d
 
 from __future__ import annotations
 
+import inspect
 import json
 import sys
 from collections.abc import Callable
@@ -940,6 +941,19 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             highlight=False,
         )
     console.print(f"results in [bold]{out.resolve()}[/bold]")
+
+
+def _one_line_summaries() -> None:
+    """Give every command the first paragraph of its help (or else of its docstring), joined
+    into one line, as the summary the list of commands shows (typer keeps the line breaks)."""
+    for command in app.registered_commands:
+        if command.short_help is None and command.callback is not None:
+            text = command.help if isinstance(command.help, str) else command.callback.__doc__
+            first = inspect.cleandoc(text or "").split("\n\n")[0]
+            command.short_help = " ".join(first.split())
+
+
+_one_line_summaries()
 
 
 def run() -> None:
