@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from PIL import Image
 from rich.console import Console
 
 import hazardhunt as hazardhunt_package
@@ -161,6 +162,8 @@ def test_the_scenarios_command_draws_a_scenario_file_with_a_field_it_defines(tmp
     done = hazardhunt("scenarios", dock, "--field", "sides", "--out", tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "dock_crossing.png").stat().st_size > 10_000
+    with Image.open(tmp_path / "dock_crossing.png") as picture:  # the dock is 16 m x 10 m
+        assert 1.4 < picture.width / picture.height < 1.8
 
 
 def test_the_scenarios_command_names_the_fields_there_are(tmp_path):

@@ -68,10 +68,22 @@ def failures_bar_chart(runs: pd.DataFrame, path: Path, log: bool = False) -> Pat
         ax.set_ylabel("failures per run")
         if log:
             ax.set_yscale("log", nonpositive="clip")
+        else:
+            _count_axis(ax, runs.loc[runs["field"] == field, "failures"].max())
         if column == 0:  # every tester, whether or not this panel has its bars
             patches = [Rectangle((0, 0), 1, 1, color=colour_of(tester)) for tester in testers]
             ax.legend(patches, testers, fontsize=8)
     return _save(figure, path)
+
+
+def _count_axis(ax: Axes, largest: float) -> None:
+    """The y axis of counts whose largest is ``largest``: from zero, never below it; a panel
+    that counted nothing says so (matplotlib would centre an axis from -0.04 to 0.04 on it)."""
+    if largest > 0:
+        ax.set_ylim(bottom=0)
+    else:
+        ax.set_ylim(0, 1)
+        ax.text(0.5, 0.5, "no failures", transform=ax.transAxes, ha="center", color="grey")
 
 
 def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:

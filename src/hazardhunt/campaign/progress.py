@@ -13,7 +13,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress
-from rich.table import Table
+from rich.table import Column, Table
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.ledger import Ledger, RunOutcome
@@ -117,21 +117,26 @@ def shown_scenario(scenario: str) -> str:
 
 def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) -> None:
     """Per scenario x field x tester with a run that ended (complete or failed): failures of
-    the run, or over seeds their mean ± std, and the mean wall time. Groups none of whose runs
-    has been run yet are counted below the table, not listed: a slice of a large grid shows its
-    own rows."""
+    the run, or over seeds their mean ± std, and the mean wall time; then what is left to
+    do. Groups none of whose runs has been run yet are counted below the table, not listed: a
+    slice of a large grid shows its own rows."""
     groups: dict[tuple[str, str, str], list[LedgerEntry]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
         groups.setdefault(key, []).append(entry)
-    not_started = {
-        key: entries
-        for key, entries in groups.items()
-        if all(entry["status"] == "pending" for entry in entries)
-    }
-    table = Table("scenario", "field", "tester", "runs", "failures", "SUT errors", "wall time (s)")
+    table = Table(
+        Column("scenario", overflow="fold"),  # a scenario file's path, whole where it is long
+        Column("field", overflow="fold"),
+        Column("tester", overflow="fold"),
+        "runs",
+        "failures",
+        "SUT errors",
+        "wall time (s)",
+    )
+    not_started = 0
     for (scenario, field, tester), entries in groups.items():
-        if (scenario, field, tester) in not_started:
+        if all(entry["status"] == "pending" for entry in entries):
+            not_started += 1
             continue
         complete = [e for e in entries if e["status"] == "complete"]
         failures = [int(e["failures"]) for e in complete]
@@ -147,6 +152,14 @@ def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) 
             f"{statistics.fmean(wall_times):.1f}" if wall_times else "-",
         )
     console.print(table)
+    _print_what_is_left(console, summary, out, not_started)
+
+
+def _print_what_is_left(
+    console: Console, summary: CampaignSummary, out: Path, not_started: int
+) -> None:
+    """Below the campaign's table: the runs that raised, the totals, and what is left to do;
+    ``not_started`` groups of the grid were left out of the table."""
     for entry in summary["runs"]:
         if entry["status"] == "failed":
             console.print(f"[red]failed:[/red] {entry['run_id']}: {escape(str(entry['error']))}")
@@ -166,10 +179,9 @@ def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) 
             "run the same command again to retry them"
         )
     if summary["runs_pending"]:
-        groups_word = "group" if len(not_started) == 1 else "groups"
         unlisted = (
-            f" (the table leaves out {len(not_started)} scenario x field x tester "
-            f"{groups_word} none of whose runs has run)"
+            f" (the table leaves out {not_started} scenario x field x tester "
+            f"{'group' if not_started == 1 else 'groups'} none of whose runs has run)"
             if not_started
             else ""
         )

@@ -140,6 +140,18 @@ def draw_human(
     ax.plot([position[0], tip[0]], [position[1], tip[1]], color="black", linewidth=1, zorder=5)
 
 
+def floor_figure_size(scenario: Scenario, size: float) -> tuple[float, float]:
+    """Width and height, in inches, of a picture of ``scenario``'s floor whose longer side is
+    ``size``: the floor's own proportions (a square floor: ``size`` by ``size``), no side below
+    half of ``size``, so that a long narrow floor is not drawn between two bands of white."""
+    floor = scenario.floor
+    longest = max(floor.width, floor.height)
+    return (
+        size * max(0.5, floor.width / longest),
+        size * max(0.5, floor.height / longest),
+    )
+
+
 def plot_episode(
     path: Path,
     scenario: Scenario,
@@ -152,7 +164,7 @@ def plot_episode(
     human: HumanParams = HumanParams(),
 ) -> Path:
     """Write a PNG of one episode: both tracks and the final poses."""
-    figure = Figure(figsize=(7, 7), dpi=110)
+    figure = Figure(figsize=floor_figure_size(scenario, 7), dpi=110)
     ax = figure.add_subplot()
     draw_floor(ax, scenario, route)
     robot_track = np.array([[row.robot_x, row.robot_y] for row in trajectory])
@@ -218,7 +230,8 @@ def animate_episode(
         fps: Frames per second of the animation (10 plays twice as fast as real time).
         last_seconds: Animate only the episode's last seconds (None: all of it); the tracks
             are drawn from the start.
-        size: Width and height of the picture, in inches at 80 dpi.
+        size: The longer side of the picture, in inches at 80 dpi (the other follows the
+            floor's proportions: :func:`floor_figure_size`).
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
 
@@ -228,7 +241,9 @@ def animate_episode(
     since = -np.inf if last_seconds is None else every[-1].time - last_seconds
     first = next(i for i, row in enumerate(every) if row.time >= since)
     frames = list(range(first, len(every)))[::-1][::frame_step][::-1]
-    figure = Figure(figsize=(size, size), dpi=80)
+    figure = Figure(  # laid out at each frame: the title's length changes
+        figsize=floor_figure_size(simulation.scenario, size), dpi=80, layout="constrained"
+    )
     FigureCanvasAgg(figure)
     ax = figure.add_subplot()
 
