@@ -23,7 +23,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress
-from rich.table import Table
+from rich.table import Column, Table
 
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
@@ -715,7 +715,7 @@ def regress(
 def _print_regress(results: list[RegressionResult], counts: dict[str, int]) -> None:
     """The table of re-run cases, their counts, and each case that could not be tested."""
     colours = {"still fails": "red", "changed": "yellow", "error": "red", "fixed": "green"}
-    table = Table("case", "expected", "now", "at (s)", "verdict")
+    table = Table(Column("case", overflow="fold"), "expected", "now", "at (s)", "verdict")
     for r in results:
         now = r.failure_class if r.failure_class is not None else r.outcome
         verdict = f"[{colours[r.verdict]}]{r.verdict}[/{colours[r.verdict]}]"
@@ -723,7 +723,8 @@ def _print_regress(results: list[RegressionResult], counts: dict[str, int]) -> N
             shown(r.case), shown(r.expected_class), shown(now), f"{r.sim_time:.2f}", verdict
         )
     console.print(table)
-    console.print(", ".join(f"{n} {v}" for v, n in counts.items()))
+    tally = ", ".join(f"{verdict}: {n}" for verdict, n in counts.items())
+    console.print(f"{len(results)} {'case' if len(results) == 1 else 'cases'}: {tally}")
     for r in results:
         if r.error is not None:
             err_console.print(
