@@ -891,6 +891,22 @@ def _validated(build: Callable[[], T]) -> T:
         raise ConfigError(format_validation_error(error)) from None
 
 
+def _print_classes_found(summary: RunSummary, out: Path) -> None:
+    """The failure classes a run found, its first failure and how to look at them."""
+    first = summary.get("first_failure_episode")
+    if not summary["failures"] or first is None:
+        return
+    classes = ", ".join(map(shown, summary.get("classes") or []))
+    found = f"{summary.get('classes_found', 0)} of {summary.get('classes_total', '?')}"
+    where = escape(str(out))
+    console.print(
+        f"failure classes found: {found}{f' ({classes})' if classes else ''}; first failure: "
+        f"episode {first}. To see it: hazardhunt replay {where} --episode {first} --gif "
+        f"failure.gif; every failure: hazardhunt report {where}",
+        highlight=False,
+    )
+
+
 def _print_run_summary(summary: RunSummary, out: Path) -> None:
     sut_errors = summary["sut_errors"]
     table = Table(
@@ -900,7 +916,7 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
         "safe contacts",
         "stalls",
         "wall time (s)",
-        "episodes/s",
+        "episodes per s",
     )
     table.add_row(
         str(summary["episodes"]),
@@ -912,6 +928,7 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
         f"{summary['episodes_per_s']:.2f}",
     )
     console.print(table)
+    _print_classes_found(summary, out)
     first = summary.get("first_sut_error")
     if sut_errors and first is not None:
         console.print(

@@ -69,6 +69,21 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
     assert json.loads(again.stdout)["finished_at"] == summary["finished_at"]
 
 
+def test_a_run_that_found_failures_names_their_classes_and_how_to_see_them(tmp_path):
+    out = tmp_path / "run"
+    done = hazardhunt("run", *run_args(out, scenario="overtaking", seed=0, episodes=6))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failures"] > 0
+    first = summary["first_failure_episode"]
+    said = (
+        f"failure classes found: {summary['classes_found']} of {summary['classes_total']} "
+        f"({', '.join(summary['classes'])}); first failure: episode {first}. To see it: "
+        f"hazardhunt replay {out} --episode {first} --gif failure.gif"
+    )
+    assert said in done.stdout
+
+
 def test_a_run_in_a_log_file_writes_lines_not_a_cut_off_bar(tmp_path, monkeypatch):
     monkeypatch.setattr(run_module, "LOG_INTERVAL_S", 0.0)
     log = io.StringIO()
