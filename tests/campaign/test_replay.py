@@ -105,7 +105,12 @@ def test_an_unfinished_run_is_a_clear_error(run_with_failures, tmp_path):
 def test_an_unknown_failure_is_a_clear_error(run_with_failures):
     done = hazardhunt("replay", run_with_failures, "--episode", 999_999)
     assert done.returncode == 2
-    assert "no failure in episode 999999" in done.stderr
+    failures = pd.read_parquet(run_with_failures / "failures.parquet")["episode"].tolist()
+    shown = ", ".join(map(str, failures[:10])) + (" ..." if len(failures) > 10 else "")
+    assert done.stderr.strip() == (
+        f"error: {run_with_failures}: no failure in episode 999999 (the run recorded "
+        f"{len(failures)} failure{'' if len(failures) == 1 else 's'}, in episodes {shown})"
+    )
 
 
 def received_copy(run_directory, folder, **plugins):

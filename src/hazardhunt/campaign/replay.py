@@ -117,7 +117,8 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
             return config, violations[0]
         known = ", ".join(str(i) for i in failures["episode"].head(10))
         recorded = (
-            f"{len(failures)} failures: {known}{' ...' if len(failures) > 10 else ''}"
+            f"{len(failures)} {'failure' if len(failures) == 1 else 'failures'}, in episodes "
+            f"{known}{' ...' if len(failures) > 10 else ''}"
             if known
             else "no failure"
         )
