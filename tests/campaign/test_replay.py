@@ -109,7 +109,11 @@ def test_an_unknown_failure_is_a_clear_error(run_with_failures):
     shown = ", ".join(map(str, failures[:10])) + (" ..." if len(failures) > 10 else "")
     assert done.stderr.strip() == (
         f"error: {run_with_failures}: no failure in episode 999999 (the run recorded "
-        f"{len(failures)} failure{'' if len(failures) == 1 else 's'}, in episodes {shown})"
+        + (
+            f"1 failure, in episode {shown})"
+            if len(failures) == 1
+            else f"{len(failures)} failures, in episodes {shown})"
+        )
     )
 
 
