@@ -246,11 +246,14 @@ SutErrorLimitOption = Annotated[
     "anything is written (a plug-in that fails on a trial episode included).",
 )
 def run_command(
-    scenario: Annotated[str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")],
+    scenario: Annotated[
+        str, typer.Option(help="crossing, head-on, overtaking or a .toml file.")
+    ] = "crossing",
     field: Annotated[
         str,
         typer.Option(help="Protective field: none, 1.25m, 2m or a field the scenario defines."),
-    ],
+    ] = "1.25m",
+    *,
     out: Annotated[Path, typer.Option(help="Directory for the run's results.")],
     tester: Annotated[
         str, typer.Option(help=f"{', '.join(TESTERS)}, or yours as package.module:Class.")

@@ -69,6 +69,15 @@ def test_a_run_writes_tables_pandas_reads_and_a_json_summary(tmp_path):
     assert json.loads(again.stdout)["finished_at"] == summary["finished_at"]
 
 
+def test_a_run_without_scenario_and_field_runs_the_studys_main_case(tmp_path):
+    done = hazardhunt(
+        "run", "--tester", "random", "--episodes", 2, "--out", tmp_path / "run", "--json"
+    )
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert (summary["scenario"], summary["field"], summary["episodes"]) == ("crossing", "1.25m", 2)
+
+
 def test_a_run_that_found_failures_names_their_classes_and_how_to_see_them(tmp_path):
     out = tmp_path / "run"
     done = hazardhunt("run", *run_args(out, scenario="overtaking", seed=0, episodes=6))
