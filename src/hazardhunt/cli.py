@@ -980,6 +980,7 @@ _one_line_summaries()
 
 _PACKAGE = Path(__file__).resolve().parent
 _show_other_warning = warnings.showwarning
+_warned: set[str] = set()
 
 
 def _show_warning(
@@ -991,10 +992,12 @@ def _show_warning(
     line: str | None = None,
 ) -> None:
     """A warning hazardhunt gives (an earlier plug-in protocol, an arm of the portfolio
-    dropped) as one line, ``warning: ...``, on stderr; those of other libraries as Python
-    shows them."""
+    dropped) as one line, ``warning: ...``, on stderr, each once; those of other libraries as
+    Python shows them."""
     if Path(filename).resolve().is_relative_to(_PACKAGE):
-        err_console.print(f"[yellow]warning:[/yellow] {escape(str(message))}", highlight=False)
+        if str(message) not in _warned:
+            _warned.add(str(message))
+            err_console.print(f"[yellow]warning:[/yellow] {escape(str(message))}", highlight=False)
     else:
         _show_other_warning(message, category, filename, lineno, file, line)
 

@@ -163,6 +163,22 @@ def test_the_command_line_runs_a_controller_of_0_1_0_and_says_what_changed(tmp_p
     assert "compat.py" not in done.stderr  # one line, not Python's with the source line below
 
 
+def test_a_campaign_says_once_what_changed_not_once_per_run(tmp_path, sut_module):
+    campaign = sut_module / "old.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [0, 1, 2]\n'
+        'episodes = 2\n[controller]\npath = "old_sut:PursuitBefore"\n'
+    )
+    done = hazardhunt(
+        "campaign", campaign, "--out", tmp_path / "out", "--workers", 2, cwd=sut_module
+    )
+    assert done.returncode == 0, done.stderr
+    warned = [line for line in done.stderr.splitlines() if "is the protocol of" in line]
+    assert len(warned) == 1
+    assert warned[0].startswith("warning: controller 'old_sut:PursuitBefore': reset(floor, ")
+    assert "compat.py" not in done.stderr
+
+
 def test_a_method_that_fits_no_version_is_one_line_naming_the_signature(sut_module):
     with pytest.raises(PluginError) as raised:
         build_controller("old_sut:ResetTakesNothing", search_path=[str(sut_module)])

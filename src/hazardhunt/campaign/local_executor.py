@@ -10,6 +10,7 @@ import os
 import shutil
 import signal
 import time
+import warnings
 from collections import deque
 from collections.abc import Callable
 from multiprocessing.connection import Connection
@@ -22,6 +23,7 @@ from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial_directory
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.processes import die_with_parent
+from hazardhunt.sut.compat import ProtocolWarning
 
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
@@ -210,10 +212,13 @@ def _serve(connection: Connection, campaign_pid: int, runs_directory: Path) -> N
 
 
 def _initialize_worker(campaign_pid: int) -> None:
-    """Tie the worker's life to the campaign process, so that no orphan goes on writing."""
+    """Tie the worker's life to the campaign process, so that no orphan goes on writing, and
+    leave warnings the campaign process gave to it."""
     die_with_parent(campaign_pid)
     # Ctrl-C is the campaign process's to handle: it kills the workers.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # A plug-in of an earlier protocol: the campaign process said so once, before any run.
+    warnings.filterwarnings("ignore", category=ProtocolWarning)
 
 
 def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> RunSummary:

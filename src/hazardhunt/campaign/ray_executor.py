@@ -9,6 +9,7 @@ import logging
 import shutil
 import tarfile
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ from hazardhunt.campaign.local_executor import WORKER_DEATH_RETRIES, OnOutcome
 from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import is_finished, partial_directory, record_run
 from hazardhunt.campaign.store import find_damage
+from hazardhunt.sut.compat import ProtocolWarning
 
 
 def execute_on_ray(
@@ -78,7 +80,9 @@ def _run_packed(run: RunConfig) -> tuple[bytes, str]:
     node = ray.get_runtime_context().get_node_id()
     with tempfile.TemporaryDirectory(prefix="hazardhunt-run-") as scratch:
         directory = Path(scratch) / run.run_id
-        record_run(run, directory)
+        with warnings.catch_warnings():  # the campaign process said so once, before any run
+            warnings.simplefilter("ignore", ProtocolWarning)
+            record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:
             archive.add(directory, arcname=".")
