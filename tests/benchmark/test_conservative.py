@@ -24,7 +24,9 @@ from hazardhunt.benchmark.held_out import (
     HELD_OUT_MUTANTS,
     AbsorbedIntoStaticMap,
     CreepsAfterWaiting,
+    ForgetsPassedHuman,
     HurriesAfterDelay,
+    TakenForTheRacks,
 )
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
@@ -186,6 +188,21 @@ def hold_up_then_walk_into_side() -> Policy:
     return policy
 
 
+def wait_against_a_rack_then_step_into_side() -> Policy:
+    """TakenForTheRacks: stand against the corner of the shelf block south-east of the crossing
+    (0.36 m from it, 0.7 m from the robot's path) and step into the rear half of the robot's
+    side as it passes."""
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.3)  # noqa: E731
+    return lie_in_wait((11.3, 8.8), NORTH, robot_past_or_standing(11.6), attack)
+
+
+def let_it_pass_then_run_into_side() -> Policy:
+    """ForgetsPassedHuman: wait 2.1 m south of the robot's path (beyond its stop distance)
+    until its rear has passed, then run after it into the rear half of its right side."""
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.3)  # noqa: E731
+    return lie_in_wait((9.0, 7.4), NORTH, robot_past_or_standing(9.6), attack)
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -197,6 +214,8 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     CreepsAfterWaiting: ("crossing", wait_beside_route_then_step_into_side),
     AbsorbedIntoStaticMap: ("crossing", wait_beside_route_then_step_into_side),
     HurriesAfterDelay: ("crossing", hold_up_then_walk_into_side),
+    TakenForTheRacks: ("crossing", wait_against_a_rack_then_step_into_side),
+    ForgetsPassedHuman: ("crossing", let_it_pass_then_run_into_side),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 

@@ -20,7 +20,7 @@ from hazardhunt.benchmark.conservative import ConservativeController, estimated_
 from hazardhunt.sut.protocols import ControlCommand, RobotParams, RobotState, TrackedHuman
 from hazardhunt.sut.route import Route
 from hazardhunt.world.floor import FloorMap
-from hazardhunt.world.geometry import FloatArray
+from hazardhunt.world.geometry import FloatArray, to_body_frame
 
 
 class CreepsAfterWaiting(ConservativeController):
@@ -185,9 +185,77 @@ class HurriesAfterDelay(ConservativeController):
         return command
 
 
+class TakenForTheRacks(ConservativeController):
+    """Mutant: a human within ``band`` m of a shelf or wall is taken for part of it and ignored
+    (a map-matching filter).
+
+    The bug: to keep the racks' own reflections from stopping the robot, the perception drops
+    whatever it sees within a band along the mapped obstacles, and a person standing against a
+    rack is inside that band. Exposed by a human who waits against a rack beside the aisle and
+    steps out into the robot's side as it passes: seen only once out of the band, too close to
+    stop for.
+    """
+
+    def __init__(self, band: float = 0.5, **options: float) -> None:
+        """Args:
+        band: Distance from a mapped obstacle within which a human is ignored, in m.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.band = band
+        self._floor: FloorMap | None = None
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._floor = floor
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if (
+            human is not None
+            and self._floor is not None
+            and self._floor.obstacle_clearance(human.position) < self.band
+        ):
+            return False
+        return super().human_threatens(time, robot, human)
+
+
+class ForgetsPassedHuman(ConservativeController):
+    """Mutant: a human the robot has driven past is forgotten for the rest of the episode (a
+    "dealt with" flag).
+
+    The bug: a planner that keeps the people on its way in a list strikes off each one the
+    robot has passed, so that someone walking away behind it does not hold it up; nothing puts
+    them back. Exposed by a human who keeps clear of the robot until it has passed, then runs
+    after it and into its side.
+    """
+
+    def __init__(self, **options: float) -> None:
+        """Args:
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self._passed = False
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._passed = False
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is not None and not self._passed:
+            forward, _ = to_body_frame(human.position, robot.x, robot.y, robot.heading)
+            self._passed = forward < -self.robot.length / 2  # behind the robot's rear
+        if self._passed:
+            return False
+        return super().human_threatens(time, robot, human)
+
+
 HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     CreepsAfterWaiting,
     AbsorbedIntoStaticMap,
     HurriesAfterDelay,
+    TakenForTheRacks,
+    ForgetsPassedHuman,
 )
-"""The held-out mutants, one planted bug each."""
+"""The held-out mutants, one planted bug each. The first three were written once the
+portfolio's arms were settled; the last two after its ``closer_gain`` was, and no default has
+been tuned on any of them."""
