@@ -126,8 +126,10 @@ def test_the_new_sut_folder_runs_its_readme_commands_unmodified(tmp_path: Path) 
     report = command("report", "results", cwd=folder)
     assert report.returncode == 0, report.stderr
     assert (folder / "results" / "report" / "index.html").is_file()
-    assert command("export", "results", "--out", "cases", cwd=folder).returncode == 0
+    exported = command("export", "results", "--out", "cases", cwd=folder)
+    assert exported.returncode == 0, exported.stderr
+    cases = len(list((folder / "cases").glob("*.toml")))
+    assert f"{cases} cases written to " in exported.stdout
     regress = command("regress", "cases", "--controller", "my_controller:MyController", cwd=folder)
     assert regress.returncode == 1, regress.stderr  # the failures are still there
-    cases = len(list((folder / "cases").glob("*.toml")))
     assert f"{cases} cases: still fails: {cases}, changed: 0, error: 0, fixed: 0" in regress.stdout

@@ -604,7 +604,8 @@ def export(
     spec = _plugin("--classifier", classifier, classifier_param)
     _warn_of_damaged_runs(directory)
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
-    console.print(f"{len(written)} case(s) written to [bold]{out.resolve()}[/bold]")
+    cases = "1 case" if len(written) == 1 else f"{len(written)} cases"
+    console.print(f"{cases} written to [bold]{out.resolve()}[/bold]")
     if not written:
         console.print("the results hold no failure")
     if pytest_module:
@@ -636,7 +637,8 @@ def copy(
             f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
     console.print(
-        f"{len(copied.copied)} run(s) copied, {len(copied.already_there)} already there, "
+        f"{len(copied.copied)} {'run' if len(copied.copied) == 1 else 'runs'} copied, "
+        f"{len(copied.already_there)} already there, "
         f"{len(copied.unfinished)} not finished yet; the copy is [bold]{out.resolve()}[/bold]"
     )
 

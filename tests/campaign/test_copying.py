@@ -42,7 +42,7 @@ def test_a_copy_leaves_the_trajectories_out_and_reads_as_the_original(
     copy = tmp_path / "kept"
     result = hazardhunt("copy", campaign, "--out", copy)
     assert result.returncode == 0, result.stderr
-    assert "1 run(s) copied, 0 already there, 1 not finished yet" in result.stdout
+    assert "1 run copied, 0 already there, 1 not finished yet" in result.stdout
     [run] = (copy / "runs").iterdir()
     assert not (run / "trajectories").exists()
     assert (campaign / "runs" / run.name / "trajectories").is_dir()
@@ -69,7 +69,7 @@ def test_copying_after_the_next_slice_adds_only_its_runs(campaign: Path, tmp_pat
     rest = hazardhunt("campaign", campaign.parent / "campaign.toml", "--out", mine)
     assert rest.returncode == 0, rest.stderr
     again = hazardhunt("copy", mine, "--out", copy)
-    assert "1 run(s) copied, 1 already there, 0 not finished yet" in again.stdout
+    assert "1 run copied, 1 already there, 0 not finished yet" in again.stdout
     after = {str(p.relative_to(copy)): p.stat().st_mtime_ns for p in (copy / "runs").rglob("*")}
     assert {name: after[name] for name in first} == first
     assert json.loads((copy / "summary.json").read_text())["runs_complete"] == 2
@@ -85,7 +85,7 @@ def test_a_slice_run_in_a_new_campaign_directory_adds_to_the_copy(
     file = campaign.parent / "campaign.toml"
     assert hazardhunt("campaign", file, "--out", fresh, "--runs", "*seed1").returncode == 0
     again = hazardhunt("copy", fresh, "--out", copy)
-    assert "1 run(s) copied, 0 already there, 1 not finished yet" in again.stdout
+    assert "1 run copied, 0 already there, 1 not finished yet" in again.stdout
     summary = json.loads((copy / "summary.json").read_text())
     assert [e["status"] for e in summary["runs"]] == ["complete", "complete"]
     assert summary["runs_complete"] == 2
@@ -111,7 +111,7 @@ def test_a_copy_made_by_an_earlier_version_takes_the_runs_of_the_same_campaign(
     assert rest.returncode == 0, rest.stderr
     again = hazardhunt("copy", mine, "--out", copy)
     assert again.returncode == 0, again.stderr
-    assert "1 run(s) copied, 1 already there, 0 not finished yet" in again.stdout
+    assert "1 run copied, 1 already there, 0 not finished yet" in again.stdout
 
 
 def test_a_file_missing_from_a_copy_is_still_damage(campaign: Path, tmp_path: Path) -> None:
@@ -177,11 +177,11 @@ def test_a_single_run_copies_and_copies_again_as_already_there(
 ) -> None:
     [run, *_] = sorted((campaign / "runs").iterdir())
     first = hazardhunt("copy", run, "--out", tmp_path / "run")
-    assert "1 run(s) copied" in first.stdout, first.stderr
+    assert "1 run copied" in first.stdout, first.stderr
     assert find_damage(tmp_path / "run") is None
     assert not (tmp_path / "run" / "trajectories").exists()
     again = hazardhunt("copy", run, "--out", tmp_path / "run")
-    assert "0 run(s) copied, 1 already there" in again.stdout
+    assert "0 runs copied, 1 already there" in again.stdout
 
 
 def test_a_received_run_with_a_symbolic_link_is_not_copied_nor_followed(
