@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import shlex
+import statistics
 import sys
 import tempfile
 import time
@@ -158,6 +159,32 @@ def score(runs: list[dict[str, Any]], args: argparse.Namespace) -> list[dict[str
     return rows
 
 
+def totals(runs: list[dict[str, Any]], args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Per tester and field, over every seed and scenario: the mutant pairs killed within both
+    budgets, and the median episode of the first failure over the pairs killed."""
+    rows = []
+    for tester in args.testers:
+        for field in args.fields:
+            mutants = [
+                r
+                for r in runs
+                if r["tester"] == tester and r["field"] == field and r["sut"] != ORIGINAL
+            ]
+            firsts = [r["first_failure_episode"] for r in mutants]
+            found = [first for first in firsts if first is not None]
+            rows.append(
+                {
+                    "tester": tester,
+                    "field": field,
+                    "pairs": len(mutants),
+                    "killed_early": killed_within(mutants, args.early),
+                    "killed": killed_within(mutants, args.episodes),
+                    "median_first_failure": statistics.median(found) if found else None,
+                }
+            )
+    return rows
+
+
 def print_tables(
     runs: list[dict[str, Any]], rows: list[dict[str, Any]], args: argparse.Namespace
 ) -> None:
@@ -174,6 +201,14 @@ def print_tables(
         print(
             f"{row['tester']:14} {row['field']:6} {row['seed']:4d}{cells} {scores:>12} "
             f"{row['false_alarms']:13d}"
+        )
+    print(f"\npairs killed within {early} / {budget} episodes over every seed and scenario")
+    for row in totals(runs, args):
+        median = row["median_first_failure"]
+        print(
+            f"{row['tester']:14} {row['field']:6} {row['killed_early']:>4d} / "
+            f"{row['killed']:<3d} of {row['pairs']:<4d} median first failure "
+            f"{'-' if median is None else f'{median:g}'}"
         )
     print("\nepisode of the first failure per SUT ('-': none within the budget)")
     columns = [
@@ -277,6 +312,7 @@ def main() -> None:
             "arguments": {k: str(v) for k, v in vars(args).items()},
             "wall_time_s": wall,
             "scores": rows,
+            "totals": totals(runs, args),
             "runs": runs,
         },
     )
