@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
+from pydantic.fields import FieldInfo
 from pydantic_core import ErrorDetails
 
 if sys.version_info >= (3, 11):
@@ -117,8 +118,7 @@ def schema_keys(model: type[BaseModel], path: Sequence[int | str]) -> list[str]:
     schema's nested models: a list, a free table)."""
     current: type[BaseModel] = model
     for part in path:
-        fields = {field.alias or name: field for name, field in current.model_fields.items()}
-        field = fields.get(str(part))
+        field = _written_fields(current).get(str(part))
         nested = [
             kind
             for kind in _alternatives(field.annotation if field else None)
@@ -127,7 +127,12 @@ def schema_keys(model: type[BaseModel], path: Sequence[int | str]) -> list[str]:
         if not nested:
             return []
         current = nested[0]
-    return [field.alias or name for name, field in current.model_fields.items()]
+    return list(_written_fields(current))
+
+
+def _written_fields(model: type[BaseModel]) -> dict[str, FieldInfo]:
+    """A model's fields by the key a file writes for each (its alias, where it has one)."""
+    return {field.alias or name: field for name, field in model.model_fields.items()}
 
 
 def _alternatives(annotation: Any) -> tuple[Any, ...]:

@@ -116,13 +116,13 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
         if violations:
             return config, violations[0]
         known = ", ".join(str(i) for i in failures["episode"].head(10))
-        if len(failures) == 1:
+        if failures.empty:
+            recorded = "no failure"
+        elif len(failures) == 1:
             recorded = f"1 failure, in episode {known}"
         else:
             more = " ..." if len(failures) > 10 else ""
-            recorded = (
-                f"{len(failures)} failures, in episodes {known}{more}" if known else "no failure"
-            )
+            recorded = f"{len(failures)} failures, in episodes {known}{more}"
         raise ReplayError(
             f"{run_directory}: no failure in episode {episode} (the run recorded {recorded})"
         )
