@@ -23,7 +23,7 @@ import json
 import os
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -39,6 +39,7 @@ from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.config import file_name
 from hazardhunt.campaign.lock import process_running, waiting_lock
+from hazardhunt.campaign.progress import shown_scenario
 from hazardhunt.campaign.replay import (
     load_run_config,
     names_sut_plugins,
@@ -91,6 +92,8 @@ class _Report:
     opening: Section | None = None
     """What the page opens with, before the study's sections."""
     findings: verdict.Verdict | None = None
+    scenario_files: dict[str, str] = field(default_factory=dict)
+    """The scenario behind each name the page shows (see :func:`_scenarios_shown`)."""
 
     @property
     def figures(self) -> Path:
@@ -133,13 +136,13 @@ def write_report(
     """
     tell = progress if progress is not None else (lambda step: None)
     tell("reading results")
-    results = load_results(directory, classifier)
+    results, scenario_files = _scenarios_shown(load_results(directory, classifier))
     final = directory / "report"
     _remove_leftovers(directory)
     scratch = directory / f".report-{os.getpid()}.partial"
     shutil.rmtree(scratch, ignore_errors=True)
     try:
-        report = _Report(scratch)
+        report = _Report(scratch, scenario_files=scenario_files)
         report.directory.mkdir()
         # Names from the results (testers, classes) are text, never matplotlib's mathtext.
         with matplotlib.rc_context({"text.parse_math": False}):
@@ -152,6 +155,28 @@ def write_report(
         shutil.rmtree(scratch, ignore_errors=True)  # a full disk keeps no half report
         raise
     return final / "index.html"
+
+
+def _scenarios_shown(results: Results) -> tuple[Results, dict[str, str]]:
+    """``results`` with each scenario named as a campaign's table names it (a built-in by its
+    name, a file by its path below the working directory, else by its file name), and the
+    scenario behind each name. Should two files get the same name, every file keeps its path."""
+    scenarios = [str(name) for name in results.runs["scenario"].unique()]
+    shown = {name: shown_scenario(name) for name in scenarios}
+    if len(set(shown.values())) < len(shown):
+        shown = {name: name for name in scenarios}
+    renamed = {
+        name: table.assign(scenario=table["scenario"].map(shown))
+        for name, table in [
+            ("runs", results.runs),
+            ("episodes", results.episodes),
+            ("failures", results.failures),
+            ("loitering", results.loitering),
+            ("violations", results.violations),
+        ]
+        if "scenario" in table.columns and not table.empty
+    }
+    return replace(results, **renamed), {name: path for path, name in shown.items()}
 
 
 def _write_sections(report: _Report, results: Results, tell: Progress) -> None:
@@ -461,7 +486,8 @@ def _learning_and_places(report: _Report, results: Results) -> None:
     for scenario in sorted(results.runs["scenario"].unique()):
         chosen = failures[failures["scenario"] == scenario]
         name = file_name(f"heat_map_{scenario}")
-        path = figures.failure_heat_map(chosen, scenario, report.figures / f"{name}.png")
+        scenario_file = report.scenario_files[scenario]
+        path = figures.failure_heat_map(chosen, scenario_file, report.figures / f"{name}.png")
         report.image(places, path, f"Failures on the floor: {scenario}")
 
 

@@ -21,6 +21,7 @@ from markupsafe import Markup, escape
 from matplotlib.figure import Figure
 
 from hazardhunt.analysis.page import Block, Prose, Section, Table, Text, image, render_page, table
+from hazardhunt.campaign.progress import shown_scenario
 from hazardhunt.campaign.store import write_bytes_atomic
 from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode
 from hazardhunt.errors import InputError
@@ -78,7 +79,7 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
     with matplotlib.rc_context({"text.parse_math": False}):
         sections.append(_most_likely(scratch, config, summary, episodes, say))
     facts = (
-        f"{config.scenario}, field {config.field}, {summary['method']}, "
+        f"{shown_scenario(config.scenario)}, field {config.field}, {summary['method']}, "
         f"{summary['episodes']:,} episodes, seed {config.seed}"
     )
     write_bytes_atomic(
