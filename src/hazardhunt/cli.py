@@ -9,10 +9,9 @@ from __future__ import annotations
 import inspect
 import json
 import sys
-import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TextIO, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn, TypeVar
 
 if sys.version_info >= (3, 11):
     pass
@@ -30,6 +29,7 @@ from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
+from hazardhunt.warning_lines import show_warnings_in_one_line
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 if TYPE_CHECKING:
@@ -980,35 +980,13 @@ def _one_line_summaries() -> None:
 _one_line_summaries()
 
 
-_PACKAGE = Path(__file__).resolve().parent
-_show_other_warning = warnings.showwarning
-_warned: set[str] = set()
-
-
-def _show_warning(
-    message: Warning | str,
-    category: type[Warning],
-    filename: str,
-    lineno: int,
-    file: TextIO | None = None,
-    line: str | None = None,
-) -> None:
-    """A warning hazardhunt gives (an earlier plug-in protocol, an arm of the portfolio
-    dropped) as one line, ``warning: ...``, on stderr, each once; those of other libraries as
-    Python shows them."""
-    if Path(filename).resolve().is_relative_to(_PACKAGE):
-        if str(message) not in _warned:
-            _warned.add(str(message))
-            err_console.print(f"[yellow]warning:[/yellow] {escape(str(message))}", highlight=False)
-    else:
-        _show_other_warning(message, category, filename, lineno, file, line)
-
-
 def run() -> None:
     """Entry point: an error hazardhunt raises is one clear line on stderr and its exit code (2
     for bad input, see :mod:`hazardhunt.errors`), a file that cannot be written one line and
     exit code 1, a warning it gives one line too, and Ctrl-C says how to resume."""
-    warnings.showwarning = _show_warning
+    show_warnings_in_one_line(
+        lambda text: err_console.print(f"[yellow]warning:[/yellow] {escape(text)}", highlight=False)
+    )
     try:
         app()
     except HazardhuntError as error:  # an input error exits 2 (InputError), the others 1

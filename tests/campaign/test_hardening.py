@@ -12,9 +12,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
+from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.search import SearchTester, SpaceParams
 from tests.helpers import hazardhunt
 
 HERE = "tests.campaign.test_hardening"
@@ -56,6 +59,30 @@ class NumberClassifier:
 class RaisingClassifier(NumberClassifier):
     def classify(self, trajectory, summary, field):
         raise ValueError("no face")
+
+
+class BrokenSampler:
+    """A sampler of one's own whose ``tell`` raises."""
+
+    def __init__(self, params, context):
+        self.space, self.horizon = params.space.decision_spaces[0], context.horizon
+
+    def ask(self):
+        return [Plan(self.space, np.zeros((self.horizon, self.space.size)))]
+
+    def tell(self, plans, results):
+        raise ZeroDivisionError("the arm's own bug")
+
+    def record(self):
+        return {}
+
+
+class BrokenSearch(SearchTester):
+    name = "broken"
+    params_model = SpaceParams
+
+    def make_sampler(self, context):
+        return BrokenSampler(self.params, context)
 
 
 def run(tmp_path, *options, episodes=6):
@@ -401,3 +428,21 @@ def test_copy_on_a_full_disk_says_so_in_one_short_line(pursuit_run, tmp_path, mo
     assert "files could not be copied; the first:" in message
     assert len(message) < 400
     assert not list(tmp_path.glob(".kept.partial"))
+
+
+def test_an_arm_dropped_in_a_campaign_worker_is_one_line_naming_the_run(tmp_path):
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["portfolio"]\nseeds = [0]\n'
+        f'episodes = 6\n[controller]\npath = "{PURSUIT}"\n[tester.portfolio]\narms = [\n'
+        f'  {{ name = "broken", method = "{HERE}:BrokenSearch" }},\n'
+        '  { name = "uniform", method = "uniform", params = { batch_size = 2 } },\n]\n'
+    )
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "out", cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    [warned] = [line for line in done.stderr.splitlines() if "dropped" in line]
+    assert warned == (
+        "warning: crossing__none__portfolio__seed0: portfolio arm 'broken' raised and was "
+        "dropped: ZeroDivisionError: the arm's own bug"
+    )
+    assert "portfolio.py" not in done.stderr  # not Python's two lines with the source

@@ -24,6 +24,7 @@ from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.processes import die_with_parent
 from hazardhunt.sut.compat import ProtocolWarning
+from hazardhunt.warning_lines import show_warnings_in_one_line
 
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
@@ -223,9 +224,12 @@ def _initialize_worker(campaign_pid: int) -> None:
 
 def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> RunSummary:
     """Execute ``run`` into its partial directory and rename it into place once complete,
-    reporting its progress over ``connection``."""
+    reporting its progress over ``connection``; hazardhunt's warnings one line each, after the
+    run's id."""
     reporter = _progress_reporter(run.run_id, connection)
-    return execute_run_atomically(run, runs_directory / run.run_id, reporter)
+    with warnings.catch_warnings():
+        show_warnings_in_one_line(prefix=f"{run.run_id}: ")
+        return execute_run_atomically(run, runs_directory / run.run_id, reporter)
 
 
 def _progress_reporter(run_id: str, connection: Connection) -> Callable[[RunProgress], None]:

@@ -20,6 +20,7 @@ from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import is_finished, partial_directory, record_run
 from hazardhunt.campaign.store import find_damage
 from hazardhunt.sut.compat import ProtocolWarning
+from hazardhunt.warning_lines import show_warnings_in_one_line
 
 
 def execute_on_ray(
@@ -82,6 +83,7 @@ def _run_packed(run: RunConfig) -> tuple[bytes, str]:
         directory = Path(scratch) / run.run_id
         with warnings.catch_warnings():  # the campaign process said so once, before any run
             warnings.simplefilter("ignore", ProtocolWarning)
+            show_warnings_in_one_line(prefix=f"{run.run_id}: ")
             record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:

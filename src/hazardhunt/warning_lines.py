@@ -1,0 +1,52 @@
+"""hazardhunt's own warnings as one line each on stderr, ``warning: ...``, each once.
+
+Python shows a warning in two lines, a path into the source and the line that warned; for a
+warning hazardhunt gives on purpose (a plug-in of an earlier protocol, an arm of the portfolio
+dropped) that is noise around one sentence. The command line shows them as one line; a
+campaign's worker processes show theirs the same way, after the run they belong to. Warnings of
+other libraries keep Python's form.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TextIO
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def _to_stderr(text: str) -> None:
+    print(f"warning: {text}", file=sys.stderr, flush=True)
+
+
+def show_warnings_in_one_line(write: Callable[[str], None] = _to_stderr, prefix: str = "") -> None:
+    """From now on, show each warning given from hazardhunt's own code once, as ``write``
+    (``prefix`` + the message); others as before.
+
+    Args:
+        write: Shows one warning's text (default: ``warning: TEXT`` on stderr).
+        prefix: Put before every message (a run's id, in a campaign's worker process).
+    """
+    shown: set[str] = set()
+    show_other = warnings.showwarning
+
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
+        if not Path(filename).resolve().is_relative_to(_PACKAGE):
+            show_other(message, category, filename, lineno, file, line)
+            return
+        text = f"{prefix}{message}"
+        if text not in shown:
+            shown.add(text)
+            write(text)
+
+    warnings.showwarning = show
