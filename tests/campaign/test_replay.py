@@ -5,9 +5,10 @@ import json
 import shutil
 import sys
 
+import numpy as np
 import pandas as pd
 import pytest
-from PIL import Image
+from PIL import Image, ImageSequence
 
 from hazardhunt.analysis.report import write_report
 from hazardhunt.campaign.config import CampaignConfig, RunConfig
@@ -49,6 +50,12 @@ def test_replay_command_confirms_and_animates(run_with_failures, tmp_path):
     assert "reproduced" in done.stdout
     with Image.open(gif) as animation:
         assert animation.n_frames > 5
+        frames = [
+            np.asarray(frame.convert("L")) < 100 for frame in ImageSequence.Iterator(animation)
+        ]
+    # The floor stays put from frame to frame: the plot's frame lines lie on the same rows.
+    frame_lines = {tuple(np.flatnonzero(dark.sum(axis=1) > 0.5 * dark.shape[1])) for dark in frames}
+    assert len(frame_lines) == 1
 
 
 def test_a_record_changed_since_the_run_is_refused_as_damaged(run_with_failures, tmp_path):

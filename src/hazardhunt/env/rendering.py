@@ -241,15 +241,22 @@ def animate_episode(
     since = -np.inf if last_seconds is None else every[-1].time - last_seconds
     first = next(i for i, row in enumerate(every) if row.time >= since)
     frames = list(range(first, len(every)))[::-1][::frame_step][::-1]
-    figure = Figure(  # laid out at each frame: the title's length changes
+    figure = Figure(
         figsize=floor_figure_size(simulation.scenario, size), dpi=80, layout="constrained"
     )
     FigureCanvasAgg(figure)
     ax = figure.add_subplot()
+    # Laid out once, for the frame with the longest title, so that the floor stays put.
+    longest = max(frames, key=lambda index: len(frame_title(title, every[index])))
+    draw_state(ax, simulation, every[: longest + 1], title)
+    figure.canvas.draw()
+    figure.set_layout_engine("none")
+    position = ax.get_position()
 
     def draw(index: int) -> list[Any]:
         ax.clear()
         draw_state(ax, simulation, every[: frames[index] + 1], title)
+        ax.set_position(position)
         return []
 
     animation = FuncAnimation(figure, draw, frames=len(frames), blit=False)
@@ -272,8 +279,14 @@ def draw_state(
     if row.predicted_human is not None:
         ax.plot(*np.asarray(row.predicted_human).reshape(-1, 2).T, ":", color="#ff7f0e")
     draw_human(ax, (row.human_x, row.human_y), row.human_heading, sim.human_params)
+    ax.set_title(frame_title(title, row), fontsize=9)
+
+
+def frame_title(title: str, row: TrajectorySample) -> str:
+    """The title of the frame drawn at ``row``: ``title``, the time, and whether the emergency
+    stop holds."""
     stop = ", EMERGENCY STOP" if row.emergency_stop else ""
-    ax.set_title(f"{title}  t = {row.time:.1f} s{stop}".strip(), fontsize=9)
+    return f"{title}  t = {row.time:.1f} s{stop}".strip()
 
 
 def plot_frames(
