@@ -44,6 +44,21 @@ def test_help_shows_the_defaults_written_in_brackets(subcommand: str, shown: str
     assert shown in " ".join(result.stdout.split())
 
 
+@pytest.mark.parametrize("subcommand", ["--help", "run", "export", "regress", "campaign"])
+def test_help_shows_no_value_for_a_flag_and_what_a_repeated_option_takes(subcommand: str) -> None:
+    result = command(*([subcommand] if subcommand == "--help" else [subcommand, "--help"]))
+    assert result.returncode == 0, result.stderr
+    rows = {line.split()[1]: line for line in result.stdout.splitlines() if "│  " in line[:6]}
+    rows |= {line.split()[2]: line for line in result.stdout.splitlines() if "│ *" in line[:4]}
+    assert "<bool>" not in result.stdout  # a flag takes no value
+    assert "list[" not in result.stdout
+    if subcommand == "run":
+        assert "KEY=VALUE" in rows["--tester-param"]
+        assert "NAME" in rows["--requirement"]
+    if subcommand == "campaign":
+        assert "PATTERN" in rows["--runs"]
+
+
 def test_the_list_of_commands_shows_each_summary_whole_on_its_row() -> None:
     result = command("--help")
     assert result.returncode == 0, result.stderr

@@ -24,6 +24,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress
 from rich.table import Column, Table
+from typer.core import TyperCommand, TyperGroup
 
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
@@ -38,7 +39,28 @@ if TYPE_CHECKING:
     from hazardhunt.campaign.records import RunSummary
     from hazardhunt.cases import RegressionResult
 
+
+class _HelpWithoutType:
+    """``--help`` shown without a value type: typer 0.29 shows it as ``--help <bool>``, as if it
+    took a value (hazardhunt's own flags set ``metavar=""`` for the same reason)."""
+
+    def get_help_option(self, ctx: Any) -> Any:
+        option = super().get_help_option(ctx)  # type: ignore[misc]
+        if option is not None:
+            option.metavar = ""
+        return option
+
+
+class _Group(_HelpWithoutType, TyperGroup):
+    pass
+
+
+class _Command(_HelpWithoutType, TyperCommand):
+    pass
+
+
 app = typer.Typer(
+    cls=_Group,
     help="Find the human behaviours that make a robot's control stack unsafe.",
     no_args_is_help=True,
     add_completion=False,
@@ -69,14 +91,18 @@ def main(
     version: Annotated[
         bool,
         typer.Option(
-            "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
+            "--version",
+            metavar="",
+            help="Print the version and exit.",
+            callback=_print_version,
+            is_eager=True,
         ),
     ] = False,
 ) -> None:
     """hazardhunt: simulation-based safety testing of a mobile robot's control stack."""
 
 
-@app.command()
+@app.command(cls=_Command)
 def scenarios(
     names: Annotated[
         list[str] | None,
@@ -148,7 +174,8 @@ ControllerOption = Annotated[
     ),
 ]
 ControllerParamOption = Annotated[
-    list[str] | None, typer.Option(help="A controller parameter as KEY=VALUE; repeatable.")
+    list[str] | None,
+    typer.Option(metavar="KEY=VALUE", help="A controller parameter as KEY=VALUE; repeatable."),
 ]
 ControllerTimeoutOption = Annotated[
     float | None,
@@ -165,14 +192,17 @@ SafetyLayerOption = Annotated[
     ),
 ]
 SafetyLayerParamOption = Annotated[
-    list[str] | None, typer.Option(help="A safety-layer parameter as KEY=VALUE; repeatable.")
+    list[str] | None,
+    typer.Option(metavar="KEY=VALUE", help="A safety-layer parameter as KEY=VALUE; repeatable."),
 ]
 ClassifierParamOption = Annotated[
-    list[str] | None, typer.Option(help="A classifier parameter as KEY=VALUE; repeatable.")
+    list[str] | None,
+    typer.Option(metavar="KEY=VALUE", help="A classifier parameter as KEY=VALUE; repeatable."),
 ]
 RequirementOption = Annotated[
     list[str] | None,
     typer.Option(
+        metavar="NAME",
         help="Judge every episode by this requirement too: a name of hazardhunt's library "
         "(separation, slow-near-people, no-restart-in-field, reach-goal), a requirements file "
         "(.toml, every requirement in it) or FILE.toml:NAME; repeatable.",
@@ -197,6 +227,7 @@ TrustPluginsOption = Annotated[
     bool,
     typer.Option(
         "--trust-plugins",
+        metavar="",
         help="Import the controller and safety-layer plug-ins the files read name (by default "
         "hazardhunt imports no code named in a run or case; name a plug-in with --controller "
         "or --safety-layer instead to choose it yourself).",
@@ -218,15 +249,17 @@ EpisodesOption = Annotated[
 TesterParamOption = Annotated[
     list[str] | None,
     typer.Option(
+        metavar="KEY=VALUE",
         help="A tester parameter as KEY=VALUE (TOML value), e.g. n_envs=2 or n_steps=1024; "
-        "repeat for several."
+        "repeat for several.",
     ),
 ]
 RobotOption = Annotated[
     list[str] | None,
     typer.Option(
+        metavar="KEY=VALUE",
         help="A robot parameter as KEY=VALUE (length, width, max_speed, max_acceleration, ...: "
-        "docs/environment.md); repeatable."
+        "docs/environment.md); repeatable.",
     ),
 ]
 SutErrorLimitOption = Annotated[
@@ -241,6 +274,7 @@ SutErrorLimitOption = Annotated[
 
 @app.command(
     "run",
+    cls=_Command,
     help="Run one tester on one scenario and field setting for a budget of episodes.\n\n"
     "Exits with code 1 when the run tested nothing (every episode, or --sut-error-limit of "
     "them, ended in a SUT error) or could not write its results; 2 for bad input, before "
@@ -289,7 +323,7 @@ def run_command(
         ),
     ] = None,
     json_output: Annotated[
-        bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
+        bool, typer.Option("--json", metavar="", help="Print a one-object JSON summary on stdout.")
     ] = False,
 ) -> None:
     """The command; long because its signature is the command's options, one per field of a run's
@@ -405,7 +439,7 @@ def _announcer() -> Callable[[str], None]:
     return announce
 
 
-@app.command()
+@app.command(cls=_Command)
 def replay(
     run_directory: Annotated[Path, typer.Argument(help="A run directory.")],
     episode: Annotated[
@@ -475,7 +509,7 @@ def replay(
         raise typer.Exit(1)
 
 
-@app.command()
+@app.command(cls=_Command)
 def campaign(
     file: Annotated[Path, typer.Argument(help="A campaign file (TOML).")],
     out: Annotated[Path, typer.Option(help="The campaign directory (created or resumed).")],
@@ -489,9 +523,10 @@ def campaign(
     runs: Annotated[
         list[str] | None,
         typer.Option(
+            metavar="PATTERN",
             help="Run only the runs whose id matches this shell pattern (e.g. "
             "'crossing__*__seed0'; repeatable) and leave the others for later: a large "
-            "campaign in slices, into one directory."
+            "campaign in slices, into one directory.",
         ),
     ] = None,
 ) -> None:
@@ -531,14 +566,15 @@ def campaign(
         raise typer.Exit(1) from None
 
 
-@app.command()
+@app.command(cls=_Command)
 def report(
     directory: Annotated[Path, typer.Argument(help="A run, campaign or estimate directory.")],
     reclassify: Annotated[
         bool,
         typer.Option(
+            metavar="",
             help="Classify every failure anew from its trajectory with the built-in taxonomy "
-            "(or --classifier's)."
+            "(or --classifier's).",
         ),
     ] = False,
     classifier: ReadClassifierOption = None,
@@ -570,18 +606,22 @@ def report(
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
 
 
-@app.command()
+@app.command(cls=_Command)
 def export(
     directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
     out: Annotated[Path, typer.Option(help="Folder for the case files (created).")],
     all_failures: Annotated[
         bool,
-        typer.Option("--all", help="One case per failure, not one per class, scenario and field."),
+        typer.Option(
+            "--all", metavar="", help="One case per failure, not one per class, scenario and field."
+        ),
     ] = False,
     pytest_module: Annotated[
         bool,
         typer.Option(
-            "--pytest", help="Also write test_hazardhunt_cases.py: the cases as pytest tests."
+            "--pytest",
+            metavar="",
+            help="Also write test_hazardhunt_cases.py: the cases as pytest tests.",
         ),
     ] = False,
     classifier: ReadClassifierOption = None,
@@ -590,6 +630,7 @@ def export(
         bool,
         typer.Option(
             "--trust-plugins",
+            metavar="",
             help="With --pytest: the test module imports the controller and safety-layer "
             "plug-ins the cases name (TRUST_PLUGINS = True in it).",
         ),
@@ -613,7 +654,7 @@ def export(
         console.print(f"pytest module written to [bold]{module}[/bold]")
 
 
-@app.command()
+@app.command(cls=_Command)
 def copy(
     directory: Annotated[Path, typer.Argument(help="A run or campaign directory.")],
     out: Annotated[
@@ -658,7 +699,7 @@ def _warn_of_damaged_runs(directory: Path) -> None:
         )
 
 
-@app.command()
+@app.command(cls=_Command)
 def regress(
     cases: Annotated[Path, typer.Argument(help="A case file or a folder of case files.")],
     controller: ControllerOption = None,
@@ -672,7 +713,7 @@ def regress(
     classifier_param: ClassifierParamOption = None,
     trust_plugins: TrustPluginsOption = False,
     json_output: Annotated[
-        bool, typer.Option("--json", help="Print the results as JSON on stdout.")
+        bool, typer.Option("--json", metavar="", help="Print the results as JSON on stdout.")
     ] = False,
 ) -> None:
     """Re-run regression cases: each still fails, changed (fails differently) or is fixed.
@@ -743,7 +784,7 @@ REGRESS_UNTESTED = 3
 """``regress``'s exit code when some case could not be tested (its SUT erred)."""
 
 
-@app.command("new-sut")
+@app.command("new-sut", cls=_Command)
 def new_sut(
     directory: Annotated[Path, typer.Argument(help="A new folder for the files (created).")],
 ) -> None:
@@ -768,6 +809,7 @@ def new_sut(
 
 @app.command(
     "estimate",
+    cls=_Command,
     help="Estimate the probability of a failure per encounter when people behave as a model of "
     "them says and the SUT's sensors and brake vary as a model of its uncertainties says "
     "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate. Exits "
