@@ -1,6 +1,8 @@
 """The episode-level searchers (cem, qd) and the novelty bonus of ppo-novelty."""
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -247,3 +249,29 @@ def test_the_boundary_probes_catch_a_robot_that_docks_blind(tester, params, tmp_
     settings = json.loads((tmp_path / "probed" / "tester" / f"{tester}.json").read_text())
     assert settings["space"]["plain_attacks"] is True
     assert run(False, "unprobed")["failures"] == 0
+
+
+COMPILED_ONCE = """
+import numpy as np
+from ribs.emitters.opt import CMAEvolutionStrategy
+from hazardhunt.testers.qd import compile_once
+compile_once()
+es = CMAEvolutionStrategy(sigma0=0.5, solution_dim=6, batch_size=4, seed=0, dtype=np.float64)
+es.reset(np.zeros(6))
+es.ask()
+es.tell(np.arange(4), np.arange(4.0), 2)
+es.ask()
+helpers = (CMAEvolutionStrategy._transform_and_check_sol, CMAEvolutionStrategy._calc_cov_update)
+print(sum(len(helper.stats.cache_hits) for helper in helpers))
+"""
+
+
+def test_qd_compiles_pyribs_helpers_once_per_machine_not_once_per_run():
+    # Every run (or campaign worker) is a new process; numba compiling pyribs' CMA-ES helpers
+    # in each cost about 3 s. The second process loads them from numba's cache on disk.
+    runs = [
+        subprocess.run([sys.executable, "-c", COMPILED_ONCE], capture_output=True, text=True)
+        for _ in range(2)
+    ]
+    assert all(run.returncode == 0 for run in runs), runs[-1].stderr
+    assert int(runs[1].stdout) == 2  # both helpers loaded from the cache

@@ -11,10 +11,17 @@ CMA-ES emitters by archive improvement; CMA-MAE (Fontaine and Nikolaidis 2023) a
 acceptance threshold of each cell.
 
 The run keeps the archive (``tester/archive.parquet``); the report draws it as a heat map.
+
+pyribs compiles its evolution strategies' helpers with numba, about 3 s in every process that
+uses them (every ``hazardhunt run``, each worker of a campaign); :func:`compile_once` keeps
+them in numba's cache on disk, so that they are compiled once per machine and loaded after:
+the same machine code, so the same numbers.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 from pathlib import Path
 from typing import Any, Literal
@@ -92,6 +99,30 @@ class QualityDiversityParams(SpaceParams):
         return self
 
 
+@functools.cache
+def compile_once() -> None:
+    """Keep the numba-compiled helpers of pyribs' evolution strategies in numba's cache on disk
+    (beside their source, or in the user's cache where that cannot be written); where neither
+    can, or a pyribs version has none, they are compiled in each process as before."""
+    from numba.core.dispatcher import Dispatcher
+    from ribs.emitters import opt
+
+    strategies = (
+        getattr(opt, name, None)
+        for name in (
+            "CMAEvolutionStrategy",
+            "SeparableCMAEvolutionStrategy",
+            "LMMAEvolutionStrategy",
+        )
+    )
+    for strategy in strategies:
+        for attribute in vars(strategy).values() if strategy is not None else ():
+            function = getattr(attribute, "__func__", attribute)  # a staticmethod's function
+            if isinstance(function, Dispatcher):
+                with contextlib.suppress(RuntimeError):  # no cache directory can be written
+                    function.enable_caching()
+
+
 class QualityDiversitySampler:
     """pyribs' scheduler over the human's decision sequences; with a ``mixed`` space, one
     archive that every decision space fills."""
@@ -155,6 +186,7 @@ class QualityDiversitySampler:
         return table
 
     def _scheduler(self, context: SearchContext) -> Any:
+        compile_once()
         from ribs.archives import GridArchive
         from ribs.emitters import EvolutionStrategyEmitter
         from ribs.schedulers import Scheduler
