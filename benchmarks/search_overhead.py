@@ -5,10 +5,11 @@ conservative controller of the mutation benchmark, where the searcher rather tha
 under test is the cost) and splits the CPU time of its search into playing episodes (the
 evaluator) and everything else: the samplers' ask and tell, the portfolio's classification of
 failures, the recording of each episode. Each tester first plays a warm-up run, untimed, so that
-one-time costs (importing pyribs and torch, numba compiling pyribs' archive and emitters:
-10-15 s once per run) are left out. Prints the episodes per CPU second and the share of the
-search's own bookkeeping, per tester, in one process (so that the ratios compare). The random
-tester plays through the recorder, not the evaluator: this does not measure it.
+one-time costs (importing pyribs and torch, numba compiling pyribs' helpers on a machine's
+first run: ``benchmarks/startup.py``) are left out. Prints the episodes per CPU second and the
+share of the search's own bookkeeping, per tester, in one process (so that the ratios
+compare). The random tester plays through the recorder, not the evaluator: this does not
+measure it.
 
     python benchmarks/search_overhead.py --testers portfolio cem qd --episodes 600
 """
