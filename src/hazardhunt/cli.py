@@ -35,22 +35,23 @@ if TYPE_CHECKING:
     from hazardhunt.cases import RegressionResult
 
 
-class _HelpWithoutType:
-    """``--help`` shown without a value type: typer 0.29 shows it as ``--help <bool>``, as if it
-    took a value (hazardhunt's own flags set ``metavar=""`` for the same reason)."""
+class _FlagsWithoutType:
+    """Flags (``--json``, ``--help``) shown without a value type: typer 0.29 shows them as
+    ``--json <bool>``, as if they took a value."""
 
-    def get_help_option(self, ctx: Any) -> Any:
-        option = super().get_help_option(ctx)  # type: ignore[misc]
-        if option is not None:
-            option.metavar = ""
-        return option
+    def get_params(self, ctx: Any) -> Any:
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for param in params:
+            if getattr(param, "is_flag", False):
+                param.metavar = ""
+        return params
 
 
-class _Group(_HelpWithoutType, TyperGroup):
+class _Group(_FlagsWithoutType, TyperGroup):
     pass
 
 
-class _Command(_HelpWithoutType, TyperCommand):
+class _Command(_FlagsWithoutType, TyperCommand):
     pass
 
 
@@ -87,7 +88,6 @@ def main(
         bool,
         typer.Option(
             "--version",
-            metavar="",
             help="Print the version and exit.",
             callback=_print_version,
             is_eager=True,
@@ -222,7 +222,6 @@ TrustPluginsOption = Annotated[
     bool,
     typer.Option(
         "--trust-plugins",
-        metavar="",
         help="Import the controller and safety-layer plug-ins the files read name (by default "
         "hazardhunt imports no code named in a run or case; name a plug-in with --controller "
         "or --safety-layer instead to choose it yourself).",
@@ -318,7 +317,7 @@ def run_command(
         ),
     ] = None,
     json_output: Annotated[
-        bool, typer.Option("--json", metavar="", help="Print a one-object JSON summary on stdout.")
+        bool, typer.Option("--json", help="Print a one-object JSON summary on stdout.")
     ] = False,
 ) -> None:
     """The command; long because its signature is the command's options, one per field of a run's
@@ -567,7 +566,6 @@ def report(
     reclassify: Annotated[
         bool,
         typer.Option(
-            metavar="",
             help="Classify every failure anew from its trajectory with the built-in taxonomy "
             "(or --classifier's).",
         ),
@@ -607,15 +605,12 @@ def export(
     out: Annotated[Path, typer.Option(help="Folder for the case files (created).")],
     all_failures: Annotated[
         bool,
-        typer.Option(
-            "--all", metavar="", help="One case per failure, not one per class, scenario and field."
-        ),
+        typer.Option("--all", help="One case per failure, not one per class, scenario and field."),
     ] = False,
     pytest_module: Annotated[
         bool,
         typer.Option(
             "--pytest",
-            metavar="",
             help="Also write test_hazardhunt_cases.py: the cases as pytest tests.",
         ),
     ] = False,
@@ -625,7 +620,6 @@ def export(
         bool,
         typer.Option(
             "--trust-plugins",
-            metavar="",
             help="With --pytest: the test module imports the controller and safety-layer "
             "plug-ins the cases name (TRUST_PLUGINS = True in it).",
         ),
@@ -708,7 +702,7 @@ def regress(
     classifier_param: ClassifierParamOption = None,
     trust_plugins: TrustPluginsOption = False,
     json_output: Annotated[
-        bool, typer.Option("--json", metavar="", help="Print the results as JSON on stdout.")
+        bool, typer.Option("--json", help="Print the results as JSON on stdout.")
     ] = False,
 ) -> None:
     """Re-run regression cases: each still fails, changed (fails differently) or is fixed.
