@@ -275,3 +275,22 @@ def test_qd_compiles_pyribs_helpers_once_per_machine_not_once_per_run():
     ]
     assert all(run.returncode == 0 for run in runs), runs[-1].stderr
     assert int(runs[1].stdout) == 2  # both helpers loaded from the cache
+
+
+WITHOUT_TORCH = """
+import sys
+from hazardhunt.testers.qd import compile_once
+compile_once()
+print("torch" in sys.modules)
+import torch
+from ribs.archives import GridArchive
+print(float(torch.ones(3).sum()), GridArchive.__name__)
+"""
+
+
+def test_qd_loads_pyribs_without_torch_and_torch_still_loads_after():
+    # pyribs imports torch where it can (1.3 s of every run's start) though a search never
+    # passes it a tensor; a process that needs torch later (PPO) still gets it.
+    run = subprocess.run([sys.executable, "-c", WITHOUT_TORCH], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["False", "3.0", "GridArchive"]

@@ -15,7 +15,9 @@ The run keeps the archive (``tester/archive.parquet``); the report draws it as a
 pyribs compiles its evolution strategies' helpers with numba, about 3 s in every process that
 uses them (every ``hazardhunt run``, each worker of a campaign); :func:`compile_once` keeps
 them in numba's cache on disk, so that they are compiled once per machine and loaded after:
-the same machine code, so the same numbers.
+the same machine code, so the same numbers. It also loads pyribs without torch, which pyribs
+imports only to accept torch's tensors (never passed here) and which would add 1.3 s to the
+start of every such process.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import sys
 from pathlib import Path
 from typing import Any, Literal
 
@@ -99,11 +102,37 @@ class QualityDiversityParams(SpaceParams):
         return self
 
 
+def import_ribs() -> None:
+    """Import pyribs' archives, emitters and schedulers, without torch unless the process has
+    it already: pyribs imports torch where it can, to accept torch's tensors and for archives
+    hazardhunt does not use; a process that needs torch later (PPO) imports it as usual."""
+    if "ribs" in sys.modules or "torch" in sys.modules:
+        return
+    sys.meta_path.insert(0, _WithoutTorch)
+    try:
+        import ribs.archives
+        import ribs.emitters
+        import ribs.schedulers  # noqa: F401
+    finally:
+        sys.meta_path.remove(_WithoutTorch)
+
+
+class _WithoutTorch:
+    """An import finder under which torch is not installed."""
+
+    @staticmethod
+    def find_spec(name: str, path: object = None, target: object = None) -> None:
+        if name == "torch" or name.startswith("torch."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+
 @functools.cache
 def compile_once() -> None:
-    """Keep the numba-compiled helpers of pyribs' evolution strategies in numba's cache on disk
-    (beside their source, or in the user's cache where that cannot be written); where neither
-    can, or a pyribs version has none, they are compiled in each process as before."""
+    """Load pyribs (:func:`import_ribs`) and keep the numba-compiled helpers of its evolution
+    strategies in numba's cache on disk (beside their source, or in the user's cache where that
+    cannot be written); where neither can, or a pyribs version has none, they are compiled in
+    each process as before."""
+    import_ribs()
     from numba.core.dispatcher import Dispatcher
     from ribs.emitters import opt
 
