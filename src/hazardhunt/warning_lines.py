@@ -3,8 +3,9 @@
 Python shows a warning in two lines, a path into the source and the line that warned; for a
 warning hazardhunt gives on purpose (a plug-in of an earlier protocol, an arm of the portfolio
 dropped) that is noise around one sentence. The command line shows them as one line; a
-campaign's worker processes show theirs the same way, after the run they belong to. Warnings of
-other libraries keep Python's form.
+campaign's worker processes send theirs to the campaign process, which shows them the same way
+after the id of the run they belong to (above its progress bars, where a worker's own writes
+would break them). Warnings of other libraries keep Python's form.
 """
 
 from __future__ import annotations
@@ -18,11 +19,14 @@ from typing import TextIO
 _PACKAGE = Path(__file__).resolve().parent
 
 
-def _to_stderr(text: str) -> None:
+def print_warning(text: str) -> None:
+    """Show one warning's text as ``warning: TEXT`` on stderr."""
     print(f"warning: {text}", file=sys.stderr, flush=True)
 
 
-def show_warnings_in_one_line(write: Callable[[str], None] = _to_stderr, prefix: str = "") -> None:
+def show_warnings_in_one_line(
+    write: Callable[[str], None] = print_warning, prefix: str = ""
+) -> None:
     """From now on, show each warning given from hazardhunt's own code once, as ``write``
     (``prefix`` + the message); others as before.
 

@@ -430,14 +430,17 @@ def test_copy_on_a_full_disk_says_so_in_one_short_line(pursuit_run, tmp_path, mo
     assert not list(tmp_path.glob(".kept.partial"))
 
 
+BROKEN_ARM_CAMPAIGN = (
+    'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["portfolio"]\nseeds = [0]\n'
+    f'episodes = 6\n[controller]\npath = "{PURSUIT}"\n[tester.portfolio]\narms = [\n'
+    f'  {{ name = "broken", method = "{HERE}:BrokenSearch" }},\n'
+    '  { name = "uniform", method = "uniform", params = { batch_size = 2 } },\n]\n'
+)
+
+
 def test_an_arm_dropped_in_a_campaign_worker_is_one_line_naming_the_run(tmp_path):
     campaign = tmp_path / "campaign.toml"
-    campaign.write_text(
-        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["portfolio"]\nseeds = [0]\n'
-        f'episodes = 6\n[controller]\npath = "{PURSUIT}"\n[tester.portfolio]\narms = [\n'
-        f'  {{ name = "broken", method = "{HERE}:BrokenSearch" }},\n'
-        '  { name = "uniform", method = "uniform", params = { batch_size = 2 } },\n]\n'
-    )
+    campaign.write_text(BROKEN_ARM_CAMPAIGN)
     done = hazardhunt("campaign", campaign, "--out", tmp_path / "out", cwd=ROOT)
     assert done.returncode == 0, done.stderr
     [warned] = [line for line in done.stderr.splitlines() if "dropped" in line]
@@ -446,3 +449,21 @@ def test_an_arm_dropped_in_a_campaign_worker_is_one_line_naming_the_run(tmp_path
         "dropped: ZeroDivisionError: the arm's own bug"
     )
     assert "portfolio.py" not in done.stderr  # not Python's two lines with the source
+
+
+@pytest.mark.parametrize("executor", ["local", pytest.param("ray", marks=pytest.mark.slow)])
+def test_a_campaign_process_shows_its_workers_warnings(executor, tmp_path, capsys, monkeypatch):
+    # A worker writing to the terminal itself breaks the progress bars drawn there (and a Ray
+    # worker's output never reaches it); the campaign process shows the line instead.
+    from hazardhunt.campaign.campaign import run_campaign
+    from hazardhunt.campaign.config import load_campaign
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))  # Ray's workers import the broken arm
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(BROKEN_ARM_CAMPAIGN)
+    summary = run_campaign(load_campaign(campaign), tmp_path / "out", executor=executor)
+    assert summary["runs_complete"] == 1
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: crossing__none__portfolio__seed0: portfolio arm 'broken' raised and was "
+        "dropped: ZeroDivisionError: the arm's own bug"
+    ]

@@ -13,6 +13,7 @@ import time
 import warnings
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.context import SpawnContext, SpawnProcess
 from pathlib import Path
@@ -24,7 +25,7 @@ from hazardhunt.campaign.run import RunProgress, execute_run_atomically, partial
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.processes import die_with_parent
 from hazardhunt.sut.compat import ProtocolWarning
-from hazardhunt.warning_lines import show_warnings_in_one_line
+from hazardhunt.warning_lines import print_warning, show_warnings_in_one_line
 
 PROGRESS_INTERVAL_S = 0.5
 """Least time between two progress reports of a run to the campaign process, in s."""
@@ -129,10 +130,17 @@ def _worker_died(
         on_outcome(failed(run, error))
 
 
+@dataclass(frozen=True)
+class _Warning:
+    """A warning hazardhunt gave in a worker, as one line: shown by the campaign process."""
+
+    text: str
+
+
 class _Worker:
     """A worker process of the local executor: executes the runs it is sent, one at a time,
-    and sends back progress reports and each run's outcome over its own pipe (so that a
-    worker killed mid-message disturbs no other)."""
+    and sends back progress reports, warnings and each run's outcome over its own pipe (so
+    that a worker killed mid-message disturbs no other)."""
 
     def __init__(self, process: SpawnProcess, connection: Connection) -> None:
         self.process = process
@@ -160,14 +168,17 @@ class _Worker:
             self.connection.send(run)
 
     def receive(self, on_episodes: OnEpisodes) -> RunOutcome | None:
-        """Read what the worker sent: progress reports, and its run's outcome once it ended;
-        ``alive`` turns False if its process has ended."""
+        """Read what the worker sent: progress reports, warnings (shown on stderr, which the
+        campaign's progress display prints above its bars), and its run's outcome once it
+        ended; ``alive`` turns False if its process has ended."""
         outcome = None
         try:
             while self.connection.poll():
                 message = self.connection.recv()
                 if isinstance(message, RunOutcome):
                     outcome, self.run = message, None
+                elif isinstance(message, _Warning):
+                    print_warning(message.text)
                 else:
                     on_episodes(*message)
         except (EOFError, OSError):
@@ -224,11 +235,13 @@ def _initialize_worker(campaign_pid: int) -> None:
 
 def _run_in_worker(run: RunConfig, runs_directory: Path, connection: Connection) -> RunSummary:
     """Execute ``run`` into its partial directory and rename it into place once complete,
-    reporting its progress over ``connection``; hazardhunt's warnings one line each, after the
-    run's id."""
+    reporting its progress over ``connection``, and hazardhunt's warnings, one line each after
+    the run's id."""
     reporter = _progress_reporter(run.run_id, connection)
     with warnings.catch_warnings():
-        show_warnings_in_one_line(prefix=f"{run.run_id}: ")
+        show_warnings_in_one_line(
+            lambda text: connection.send(_Warning(text)), prefix=f"{run.run_id}: "
+        )
         return execute_run_atomically(run, runs_directory / run.run_id, reporter)
 
 

@@ -20,7 +20,7 @@ from hazardhunt.campaign.records import RunSummary
 from hazardhunt.campaign.run import is_finished, partial_directory, record_run
 from hazardhunt.campaign.store import find_damage
 from hazardhunt.sut.compat import ProtocolWarning
-from hazardhunt.warning_lines import show_warnings_in_one_line
+from hazardhunt.warning_lines import print_warning, show_warnings_in_one_line
 
 
 def execute_on_ray(
@@ -52,12 +52,14 @@ def execute_on_ray(
             [ready], _ = ray.wait(list(pending), num_returns=1)
             run = pending.pop(ready)
             try:
-                archive, node = ray.get(ready)
+                archive, node, given = ray.get(ready)
             except ray.exceptions.RayError as error:
                 # The cause names the run's own exception; the error holds its remote traceback.
                 cause = getattr(error, "cause", None) or error
                 on_outcome(RunOutcome(run, None, f"{type(cause).__name__}: {cause}", str(error)))
                 continue
+            for text in given:
+                print_warning(text)
             try:
                 summary = _unpack(archive, runs_directory / run.run_id)
             except (OSError, RuntimeError) as error:
@@ -73,22 +75,24 @@ def execute_on_ray(
             ray.shutdown()
 
 
-def _run_packed(run: RunConfig) -> tuple[bytes, str]:
-    """Execute ``run`` in a scratch directory: that directory as a tar archive, and the id of
-    the Ray node it executed on."""
+def _run_packed(run: RunConfig) -> tuple[bytes, str, list[str]]:
+    """Execute ``run`` in a scratch directory: that directory as a tar archive, the id of the
+    Ray node it executed on, and the warnings hazardhunt gave, one line each after the run's id
+    (the campaign process shows them: a worker's output does not reach it)."""
     import ray
 
     node = ray.get_runtime_context().get_node_id()
+    given: list[str] = []
     with tempfile.TemporaryDirectory(prefix="hazardhunt-run-") as scratch:
         directory = Path(scratch) / run.run_id
         with warnings.catch_warnings():  # the campaign process said so once, before any run
             warnings.simplefilter("ignore", ProtocolWarning)
-            show_warnings_in_one_line(prefix=f"{run.run_id}: ")
+            show_warnings_in_one_line(given.append, prefix=f"{run.run_id}: ")
             record_run(run, directory)
         buffer = io.BytesIO()
         with tarfile.open(fileobj=buffer, mode="w") as archive:
             archive.add(directory, arcname=".")
-        return buffer.getvalue(), node
+        return buffer.getvalue(), node, given
 
 
 def _unpack(archive: bytes, final: Path) -> RunSummary:
