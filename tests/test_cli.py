@@ -44,6 +44,22 @@ def test_help_shows_the_defaults_written_in_brackets(subcommand: str, shown: str
     assert shown in " ".join(result.stdout.split())
 
 
+@pytest.mark.parametrize(
+    ("subcommand", "replaced"),
+    [
+        ("run", "the built-in NMPC"),
+        ("estimate", "the built-in NMPC"),
+        ("regress", "the case's own"),
+    ],
+)
+def test_help_says_what_a_controller_of_ones_own_replaces_there(subcommand, replaced):
+    result = command(subcommand, "--help")
+    assert result.returncode == 0, result.stderr
+    text = " ".join(result.stdout.replace("│", " ").split())
+    assert f"package.module:Class, instead of {replaced}." in text
+    assert "regress" not in text or subcommand == "regress"
+
+
 @pytest.mark.parametrize("subcommand", ["--help", "run", "export", "regress", "campaign"])
 def test_help_shows_no_value_for_a_flag_and_what_a_repeated_option_takes(subcommand: str) -> None:
     result = command(*([subcommand] if subcommand == "--help" else [subcommand, "--help"]))

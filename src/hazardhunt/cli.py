@@ -163,10 +163,11 @@ def scenarios(
 
 ControllerOption = Annotated[
     str | None,
-    typer.Option(
-        help="Your controller as package.module:Class, instead of the built-in NMPC (or, for "
-        "regress, of the case's own)."
-    ),
+    typer.Option(help="Your controller as package.module:Class, instead of the built-in NMPC."),
+]
+RegressControllerOption = Annotated[
+    str | None,
+    typer.Option(help="A controller as package.module:Class, instead of the case's own."),
 ]
 ControllerParamOption = Annotated[
     list[str] | None,
@@ -181,10 +182,11 @@ ControllerTimeoutOption = Annotated[
 ]
 SafetyLayerOption = Annotated[
     str | None,
-    typer.Option(
-        help="Your safety layer as package.module:Class, instead of the laser field (or, for "
-        "regress, of the case's own)."
-    ),
+    typer.Option(help="Your safety layer as package.module:Class, instead of the laser field."),
+]
+RegressSafetyLayerOption = Annotated[
+    str | None,
+    typer.Option(help="A safety layer as package.module:Class, instead of the case's own."),
 ]
 SafetyLayerParamOption = Annotated[
     list[str] | None,
@@ -691,9 +693,9 @@ def _warn_of_damaged_runs(directory: Path) -> None:
 @app.command(cls=_Command)
 def regress(
     cases: Annotated[Path, typer.Argument(help="A case file or a folder of case files.")],
-    controller: ControllerOption = None,
+    controller: RegressControllerOption = None,
     controller_param: ControllerParamOption = None,
-    safety_layer: SafetyLayerOption = None,
+    safety_layer: RegressSafetyLayerOption = None,
     safety_layer_param: SafetyLayerParamOption = None,
     field: Annotated[
         str | None, typer.Option(help="Re-run with this field setting instead of the case's.")
