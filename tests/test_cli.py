@@ -58,6 +58,14 @@ def test_help_says_what_a_controller_of_ones_own_replaces_there(subcommand, repl
     text = " ".join(result.stdout.replace("│", " ").split())
     assert f"package.module:Class, instead of {replaced}." in text
     assert "regress" not in text or subcommand == "regress"
+    assert "for campaign" not in text  # the classifier's help said what it does in campaign
+
+
+def test_campaign_help_says_its_classifier_replaces_the_campaign_files():
+    result = command("campaign", "--help")
+    assert result.returncode == 0, result.stderr
+    text = " ".join(result.stdout.replace("│", " ").split())
+    assert "instead of the campaign file's [classifier] table or the built-in one." in text
 
 
 @pytest.mark.parametrize("subcommand", ["--help", "run", "export", "regress", "campaign"])

@@ -208,8 +208,14 @@ RequirementOption = Annotated[
 RunClassifierOption = Annotated[
     str | None,
     typer.Option(
-        help="Your failure classifier as package.module:Class, instead of the built-in one (or, "
-        "for campaign, of the campaign file's \\[classifier] table)."
+        help="Your failure classifier as package.module:Class, instead of the built-in one."
+    ),
+]
+CampaignClassifierOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Your failure classifier as package.module:Class, instead of the campaign file's "
+        "\\[classifier] table or the built-in one."
     ),
 ]
 ReadClassifierOption = Annotated[
@@ -514,7 +520,7 @@ def campaign(
     address: Annotated[
         str | None, typer.Option(help="Address of an existing Ray cluster (with --executor ray).")
     ] = None,
-    classifier: RunClassifierOption = None,
+    classifier: CampaignClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
     runs: Annotated[
         list[str] | None,
