@@ -55,12 +55,13 @@ def section(results: Results, images: Path, doc: Path) -> str:
         if others
         else ""
     )
+    left = STUDY_RUNS - int(study.sum())
     lines = [
         "## The full budget",
         "",
         f"{int(study.sum())} of the study's {STUDY_RUNS} runs are done "
         f"({', '.join(sorted(runs.loc[study, 'run_id']))}); "
-        f"{STUDY_RUNS - int(study.sum())} are left.{beyond} In all {episodes:,} episodes in "
+        f"{left} {'is' if left == 1 else 'are'} left.{beyond} In all {episodes:,} episodes in "
         f"{hours:.1f} h of run time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per "
         f"run on average); each run plays the study's {STUDY_EPISODES:,} episodes.",
         "",

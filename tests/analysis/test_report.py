@@ -247,6 +247,10 @@ def test_a_partly_finished_campaign_reports_its_finished_runs(campaign, tmp_path
     assert results.unfinished == [unfinished.name]
     assert len(results.runs) == len(list((copy / "runs").iterdir())) - 1
     assert unfinished.name not in set(results.episodes["run_id"])
+    page = report_module._Report(tmp_path / "report")
+    report_module._runs(page, results)
+    said = " ".join(str(getattr(block, "text", "")) for block in page.sections[0].blocks)
+    assert f"1 run of the campaign has not finished and is left out: {unfinished.name}." in said
 
 
 def test_reclassifying_from_the_stored_trajectories_gives_the_recorded_classes(campaign):

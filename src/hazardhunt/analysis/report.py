@@ -640,8 +640,13 @@ def _runs(report: _Report, results: Results) -> None:
     if results.unfinished:
         section.blocks.append(
             Text(
-                f"{len(results.unfinished)} runs of the campaign have not finished and are left "
-                f"out: {', '.join(results.unfinished)}.",
+                (
+                    "1 run of the campaign has not finished and is left out"
+                    if len(results.unfinished) == 1
+                    else f"{len(results.unfinished)} runs of the campaign have not finished and "
+                    "are left out"
+                )
+                + f": {', '.join(results.unfinished)}.",
                 "warning",
             )
         )
