@@ -637,16 +637,12 @@ def _runs(report: _Report, results: Results) -> None:
                     "with its own (docs/design.md, Determinism)."
                 )
             )
-    if results.unfinished:
+    if unfinished := len(results.unfinished):
+        one = unfinished == 1
         section.blocks.append(
             Text(
-                (
-                    "1 run of the campaign has not finished and is left out"
-                    if len(results.unfinished) == 1
-                    else f"{len(results.unfinished)} runs of the campaign have not finished and "
-                    "are left out"
-                )
-                + f": {', '.join(results.unfinished)}.",
+                f"{unfinished} run{_s(unfinished)} of the campaign {'has' if one else 'have'} not "
+                f"finished and {'is' if one else 'are'} left out: {', '.join(results.unfinished)}.",
                 "warning",
             )
         )
