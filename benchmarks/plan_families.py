@@ -10,7 +10,9 @@ drawn with seed 0, and prints the failures and the episode of the first. The fam
   (the aimed one at top speed);
 - ``route-then-aim``: a route decision, then an aimed one at top speed from a uniform time on;
 - ``ambush``: wait beside the route (0.9-3 m to a side) until the robot is within a uniform
-  1-5 m, then go for a uniform bearing around it.
+  1-5 m, then go for a uniform bearing around it;
+- ``ambush-late``: the same, waiting in the last quarter of the route (where a controller
+  switches to docking, say).
 
 Every family walks round walls and shelves (``detour``).
 
@@ -43,6 +45,7 @@ FAMILIES = (
     "route-switch",
     "route-then-aim",
     "ambush",
+    "ambush-late",
 )
 Steer = Callable[[Simulation, int], NDArray[Any]]
 
@@ -52,8 +55,9 @@ def steering(family: str, rng: np.random.Generator, horizon: int) -> Steer:
     switch = int(rng.integers(1, horizon))
     first, second = rng.uniform(-1.0, 1.0, 3), rng.uniform(-1.0, 1.0, 3)
     every = rng.uniform(-1.0, 1.0, (horizon, 3))
-    if family == "ambush":
-        along, offset = rng.uniform(-1.0, 1.0), rng.choice([-1, 1]) * rng.uniform(0.3, 1.0)
+    if family.startswith("ambush"):
+        along = rng.uniform(0.5 if family == "ambush-late" else -1.0, 1.0)
+        offset = rng.choice([-1, 1]) * rng.uniform(0.3, 1.0)
         trigger, bearing = rng.uniform(1.0, 5.0), rng.uniform(-1.0, 1.0)
 
         def ambush(sim: Simulation, step: int) -> NDArray[Any]:
