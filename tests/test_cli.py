@@ -83,6 +83,27 @@ def test_help_shows_no_value_for_a_flag_and_what_a_repeated_option_takes(subcomm
         assert "PATTERN" in rows["--runs"]
 
 
+@pytest.mark.parametrize(
+    ("subcommand", "usage"),
+    [
+        ("report", "report [OPTIONS] DIRECTORY"),
+        ("replay", "replay [OPTIONS] RUN_DIRECTORY"),
+        ("scenarios", "scenarios [OPTIONS] [NAMES]..."),
+    ],
+)
+def test_the_usage_line_names_the_arguments_as_the_help_does(subcommand: str, usage: str) -> None:
+    result = command(subcommand, "--help")
+    assert result.returncode == 0, result.stderr
+    assert f" {usage} " in " ".join(result.stdout.split())
+
+
+def test_run_help_gives_tester_parameters_of_the_default_tester() -> None:
+    result = command("run", "--help")
+    assert result.returncode == 0, result.stderr
+    text = " ".join(result.stdout.replace("│", " ").split())
+    assert "e.g. workers=2 (portfolio, cem, qd, random)" in text
+
+
 def test_the_list_of_commands_shows_each_summary_whole_on_its_row() -> None:
     result = command("--help")
     assert result.returncode == 0, result.stderr

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -52,7 +53,18 @@ class _Group(_FlagsWithoutType, TyperGroup):
 
 
 class _Command(_FlagsWithoutType, TyperCommand):
-    pass
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        """Arguments in the usage line as ``DIRECTORY`` and ``[NAMES]...``, as the help's own
+        text names them: typer 0.29 writes ``{directory}`` and ``[names]...``."""
+        return [
+            re.sub(r"^([{\[])(\w+)[}\]]", _argument_in_usage, piece)
+            for piece in super().collect_usage_pieces(ctx)
+        ]
+
+
+def _argument_in_usage(match: re.Match[str]) -> str:
+    name = match[2].upper()
+    return name if match[1] == "{" else f"[{name}]"
 
 
 app = typer.Typer(
@@ -252,8 +264,9 @@ TesterParamOption = Annotated[
     list[str] | None,
     typer.Option(
         metavar="KEY=VALUE",
-        help="A tester parameter as KEY=VALUE (TOML value), e.g. n_envs=2 or n_steps=1024; "
-        "repeat for several.",
+        help="A tester parameter as KEY=VALUE (TOML value), e.g. workers=2 (portfolio, cem, "
+        "qd, random), space=aim (cem, qd, random) or n_envs=2 (ppo-*); repeat for "
+        "several (docs/search-methods.md).",
     ),
 ]
 RobotOption = Annotated[
@@ -831,7 +844,14 @@ def estimate_command(
         ),
     ] = "mc",
     episodes: Annotated[int, typer.Option(help="Budget of episodes.")] = 2000,
-    batch_size: Annotated[int, typer.Option(help="Episodes per batch.")] = 200,
+    batch_size: Annotated[
+        int | None,
+        typer.Option(
+            help="Episodes per batch (ce: the proposal moves between batches; splitting: "
+            "samples per level) \\[default: 200, or fewer where --episodes would not give the "
+            "method its fewest batches: 1 for mc, 3 for ce, 2 for splitting]."
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the estimate.")] = 0,
     people: Annotated[
         str | None,
@@ -856,7 +876,15 @@ def estimate_command(
     from hazardhunt.campaign.config import EnvOptions
     from hazardhunt.likelihood.estimators import EstimatorParams
     from hazardhunt.likelihood.results import summarise, write_summary
-    from hazardhunt.likelihood.run import WALKING_PERIOD, EstimateConfig, EstimateRun
+    from hazardhunt.likelihood.run import (
+        WALKING_PERIOD,
+        EstimateConfig,
+        EstimateRun,
+        default_batch_size,
+    )
+
+    if batch_size is None:
+        batch_size = default_batch_size(method, episodes)
 
     config = _validated(
         lambda: EstimateConfig(

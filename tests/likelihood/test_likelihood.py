@@ -23,7 +23,7 @@ from hazardhunt.likelihood.people import (
 )
 from hazardhunt.likelihood.proposal import Proposal
 from hazardhunt.likelihood.results import summarise
-from hazardhunt.likelihood.run import EstimateConfig, EstimateRun, draw_of
+from hazardhunt.likelihood.run import EstimateConfig, EstimateRun, default_batch_size, draw_of
 from hazardhunt.likelihood.toy import ClosedFormEncounters
 from hazardhunt.likelihood.uncertainty import load_uncertainties
 from hazardhunt.sim.effects import SutEffects
@@ -451,6 +451,22 @@ def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):
     assert "(the first: controller: RuntimeError: lost the localisation)" in broken.stderr
     assert "nothing was tested" in broken.stderr
     assert not (tmp_path / "broken").exists()
+
+
+def test_a_small_budget_without_a_batch_size_gets_batches_it_can_play(tmp_path):
+    assert [default_batch_size(m, 2000) for m in ("mc", "ce", "splitting")] == [200, 200, 200]
+    assert [default_batch_size(m, 150) for m in ("mc", "ce", "splitting")] == [150, 50, 75]
+    # The smallest budget with cross-entropy, which needs three batches: what a user who types
+    # it without --batch-size gets is an estimate, not an error about the default.
+    controller = "hazardhunt.benchmark.conservative:ConservativeController"
+    result = hazardhunt(
+        "estimate", "--method", "ce", "--episodes", 100, "--scenario", "head-on",
+        "--field", "none", "--controller", controller, "--out", tmp_path / "ce", cwd=ROOT,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    config = json.loads((tmp_path / "ce" / "config.json").read_text())
+    assert config["estimator"]["batch_size"] == 33
+    assert len(list((tmp_path / "ce" / "batches").glob("*.parquet"))) >= 3
 
 
 def estimate_with(out, controller):

@@ -41,6 +41,8 @@ CONFIDENCE = 0.95
 """Coverage of every interval."""
 MIN_EPISODES = 100
 """The smallest budget an estimate takes: fewer give no useful interval."""
+BATCH_SIZE = 200
+"""Episodes per batch unless the user or a small budget says otherwise."""
 
 
 class EstimatorParams(BaseModel):
@@ -53,7 +55,7 @@ class EstimatorParams(BaseModel):
     ``splitting`` (multilevel splitting in the model's parameters, :mod:`.splitting`). Plain
     Monte Carlo is the default: its interval is exact whatever the failures look like, where
     the other two can miss a mechanism their proposals or chains do not reach."""
-    batch_size: int = Field(default=200, ge=10, le=100_000)
+    batch_size: int = Field(default=BATCH_SIZE, ge=10, le=100_000)
     """Episodes per batch; the proposal may change between batches (``splitting``: the
     samples per level)."""
     elite_share: float = Field(default=0.1, gt=0.0, lt=1.0)

@@ -39,6 +39,7 @@ from hazardhunt.likelihood.encounters import (
     played_row,
 )
 from hazardhunt.likelihood.estimators import (
+    BATCH_SIZE,
     MIN_EPISODES,
     EstimatorParams,
     PlannedBatch,
@@ -91,6 +92,18 @@ def nothing_tested(table: pd.DataFrame) -> str:
     )
 
 
+BATCHES_AT_LEAST: dict[str, int] = {"mc": 1, "ce": 3, "splitting": 2}
+"""The fewest batches (levels, for ``splitting``) each method needs to give an interval."""
+
+
+def default_batch_size(method: str, episodes: int) -> int:
+    """The batch size of an estimate that names none: the estimator's 200, or fewer where the
+    budget would not give ``method`` its fewest batches (:data:`BATCHES_AT_LEAST`), never
+    below the 10 a batch needs (a budget too small even then is refused by
+    :func:`check_budget`)."""
+    return max(10, min(BATCH_SIZE, episodes // BATCHES_AT_LEAST.get(method, 1)))
+
+
 def check_budget(config: EstimateConfig) -> None:
     """Refuse a budget too small for an interval.
 
@@ -105,13 +118,13 @@ def check_budget(config: EstimateConfig) -> None:
             f"batch_size: batches of {size} episodes are more than the budget of {episodes}; "
             "give a --batch-size of at most --episodes"
         )
-    if method == "ce" and episodes < 3 * size:
+    if method == "ce" and episodes < BATCHES_AT_LEAST["ce"] * size:
         raise InputError(
             f"episodes: {episodes} episodes in batches of {size} give cross-entropy importance "
             f"sampling fewer than 3 batches; give at least {3 * size} episodes or a smaller "
             "--batch-size"
         )
-    if method == "splitting" and episodes < 2 * size:
+    if method == "splitting" and episodes < BATCHES_AT_LEAST["splitting"] * size:
         raise InputError(
             f"episodes: {episodes} episodes give splitting with {size} samples per level fewer "
             f"than 2 levels; give at least {2 * size} episodes or a smaller --batch-size"
