@@ -26,6 +26,7 @@ from hazardhunt.benchmark.held_out import (
     CreepsAfterWaiting,
     ForgetsPassedHuman,
     HurriesAfterDelay,
+    PriorityAtCrossings,
     TakenForTheRacks,
 )
 from hazardhunt.sim.simulation import Simulation
@@ -203,6 +204,14 @@ def let_it_pass_then_run_into_side() -> Policy:
     return lie_in_wait((9.0, 7.4), NORTH, robot_past_or_standing(9.6), attack)
 
 
+def come_from_the_side_aisle_into_side() -> Policy:
+    """PriorityAtCrossings: wait in the side aisle south of the crossing, 2 m from the robot's
+    path (beyond its stop distance), and run into the rear half of its right side as it
+    crosses."""
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.3)  # noqa: E731
+    return lie_in_wait((10.5, 7.8), NORTH, robot_past_or_standing(9.9), attack)
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -216,6 +225,7 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     HurriesAfterDelay: ("crossing", hold_up_then_walk_into_side),
     TakenForTheRacks: ("crossing", wait_against_a_rack_then_step_into_side),
     ForgetsPassedHuman: ("crossing", let_it_pass_then_run_into_side),
+    PriorityAtCrossings: ("crossing", come_from_the_side_aisle_into_side),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 
