@@ -56,12 +56,17 @@ def section(results: Results, images: Path, doc: Path) -> str:
         else ""
     )
     left = STUDY_RUNS - int(study.sum())
+    done = (
+        f"All {STUDY_RUNS} of the study's runs are done."
+        if left == 0
+        else f"{int(study.sum())} of the study's {STUDY_RUNS} runs are done "
+        f"({', '.join(sorted(runs.loc[study, 'run_id']))}); "
+        f"{left} {'is' if left == 1 else 'are'} left."
+    )
     lines = [
         "## The full budget",
         "",
-        f"{int(study.sum())} of the study's {STUDY_RUNS} runs are done "
-        f"({', '.join(sorted(runs.loc[study, 'run_id']))}); "
-        f"{left} {'is' if left == 1 else 'are'} left.{beyond} In all {episodes:,} episodes in "
+        f"{done}{beyond} In all {episodes:,} episodes in "
         f"{hours:.1f} h of run time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per "
         f"run on average); each run plays the study's {STUDY_EPISODES:,} episodes.",
         "",
