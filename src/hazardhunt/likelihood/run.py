@@ -118,16 +118,18 @@ def check_budget(config: EstimateConfig) -> None:
             f"batch_size: batches of {size} episodes are more than the budget of {episodes}; "
             "give a --batch-size of at most --episodes"
         )
-    if method == "ce" and episodes < BATCHES_AT_LEAST["ce"] * size:
+    batches = BATCHES_AT_LEAST[method]
+    if method == "ce" and episodes < batches * size:
         raise InputError(
             f"episodes: {episodes} episodes in batches of {size} give cross-entropy importance "
-            f"sampling fewer than 3 batches; give at least {3 * size} episodes or a smaller "
-            "--batch-size"
+            f"sampling fewer than {batches} batches; give at least {batches * size} episodes or "
+            "a smaller --batch-size"
         )
-    if method == "splitting" and episodes < BATCHES_AT_LEAST["splitting"] * size:
+    if method == "splitting" and episodes < batches * size:
         raise InputError(
             f"episodes: {episodes} episodes give splitting with {size} samples per level fewer "
-            f"than 2 levels; give at least {2 * size} episodes or a smaller --batch-size"
+            f"than {batches} levels; give at least {batches * size} episodes or a smaller "
+            "--batch-size"
         )
 
 
