@@ -6,7 +6,9 @@ under ``benchmarks/results/study/`` this prints its failures and classes, failur
 of ``--block`` episodes (2,000), and per block of ``--long-block`` (5,000) the loitering
 episodes, the share of timeouts, the mean simulated episode and the risk summed by episodes
 without a failure; then the simulated hours, failures per simulated hour, the share of
-failures with a standing human, time in the field, stalls and timeouts.
+failures with a standing human, time in the field, stalls and timeouts; and for a portfolio run,
+per arm the episodes it played and the failures it found, and the arm that found each class
+first.
 
     python scripts/study_numbers.py
     python scripts/study_numbers.py --results DIR [DIR ...] --block 2000 --long-block 5000
@@ -20,6 +22,7 @@ from pathlib import Path
 import pandas as pd
 
 from hazardhunt.analysis.results import load_results_of
+from hazardhunt.analysis.verdict import ARMS_FILE, episode_arms
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -60,6 +63,24 @@ def describe_run(episodes: pd.DataFrame, failures: pd.DataFrame, block: int, lon
     )
 
 
+def describe_arms(episodes: pd.DataFrame, failures: pd.DataFrame, directory: Path) -> str:
+    """For a portfolio run, the lines on its arms; empty for any other run."""
+    played = episode_arms(directory / ARMS_FILE)
+    if not played:
+        return ""
+    arm = episodes["episode"].map(played).fillna("unknown")
+    failed = episodes["outcome"] == "failure"
+    counts = pd.DataFrame({"episodes": arm.value_counts(), "failures": arm[failed].value_counts()})
+    counts = counts.fillna(0).astype(int).sort_values("episodes", ascending=False)
+    first = failures.sort_values("episode", kind="stable").drop_duplicates("class")
+    finders = {
+        str(row["class"]): f"{played.get(int(row['episode']), 'unknown')} at {row['episode']}"
+        for row in first.to_dict("records")
+    }
+    shares = ", ".join(f"{name} {row.episodes} ({row.failures})" for name, row in counts.iterrows())
+    return f"  arms (episodes, failures): {shares}\n  first of each class: {finders}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     default = REPOSITORY / "benchmarks" / "results" / "study"
@@ -68,10 +89,15 @@ def main() -> None:
     parser.add_argument("--long-block", type=int, default=5000, help="episodes per trend")
     args = parser.parse_args()
     results = load_results_of(args.results)
+    directories = dict(zip(results.runs["run_id"], results.runs["directory"], strict=True))
     for run_id, episodes in results.episodes.groupby("run_id", sort=True):
         print(run_id)
         failures = results.failures[results.failures["run_id"] == run_id]
-        print(describe_run(episodes.sort_values("episode"), failures, args.block, args.long_block))
+        episodes = episodes.sort_values("episode")
+        print(describe_run(episodes, failures, args.block, args.long_block))
+        arms = describe_arms(episodes, failures, Path(directories[run_id]))
+        if arms:
+            print(arms)
 
 
 if __name__ == "__main__":

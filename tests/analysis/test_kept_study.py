@@ -2,6 +2,8 @@
 what scripts/reproduction.py writes from benchmarks/results/study today, so no number in it
 is stale or typed by hand."""
 
+import json
+import re
 import shutil
 import subprocess
 import sys
@@ -45,3 +47,25 @@ def test_the_reproduction_document_says_what_the_kept_results_say(tmp_path):
     assert generated(doc.read_text()) == generated(DOC.read_text()), (
         "docs/reproduction.md is stale: run python scripts/reproduction.py"
     )
+
+
+PORTFOLIO = ROOT / "benchmarks" / "results" / "study-portfolio"
+
+
+@pytest.mark.skipif(not PORTFOLIO.is_dir(), reason="no kept portfolio runs")
+def test_the_portfolio_runs_arms_are_printed_and_add_up_to_each_run():
+    done = subprocess.run(
+        [sys.executable, "scripts/study_numbers.py", "--results", PORTFOLIO],
+        cwd=ROOT, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    for run in sorted((PORTFOLIO / "runs").iterdir()):
+        summary = json.loads((run / "summary.json").read_text())
+        block = done.stdout.split(run.name + "\n", 1)[1]
+        arms = re.search(r"  arms \(episodes, failures\): (.*)\n", block)
+        assert arms is not None, run.name
+        played = re.findall(r"([\w-]+) (\d+) \((\d+)\)", arms.group(1))
+        assert "unknown" not in {name for name, _, _ in played}
+        assert sum(int(episodes) for _, episodes, _ in played) == summary["episodes"]
+        assert sum(int(failures) for _, _, failures in played) == summary["failures"]
+        assert "  first of each class: {" in block

@@ -125,7 +125,7 @@ def arms_found(results: Results) -> pd.DataFrame:
         path = Path(directory) / ARMS_FILE
         if not path.is_file():
             continue
-        arms = _episode_arms(path)
+        arms = episode_arms(path)
         own = failures[(failures["run_id"] == run_id) & (failures["class"] != OTHER)]
         first = own.sort_values("episode", kind="stable").drop_duplicates("class")
         for failure in first.to_dict("records"):
@@ -134,7 +134,7 @@ def arms_found(results: Results) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=columns)
 
 
-def _episode_arms(path: Path) -> dict[int, str]:
+def episode_arms(path: Path) -> dict[int, str]:
     """Episode -> arm from a run's ``arms.csv``; empty if it does not read as one."""
     try:
         table = pd.read_csv(path, dtype={"arm": str})
