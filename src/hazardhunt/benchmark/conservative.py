@@ -127,6 +127,7 @@ class ConservativeController:
         self.control_period = control_period
         self.robot = RobotParams()
         self.stop_distance = self.stop_budget(self.robot).stop_distance
+        self.floor: FloorMap | None = None
         self._route: Route | None = None
         self._progress = 0.0
 
@@ -142,7 +143,8 @@ class ConservativeController:
         )
 
     def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
-        """Start following ``route``; the stop distance is derived from ``params``."""
+        """Start following ``route`` on ``floor``; the stop distance is derived from ``params``."""
+        self.floor = floor
         self.robot = params
         self.stop_distance = self.stop_budget(params).stop_distance
         self._route = route

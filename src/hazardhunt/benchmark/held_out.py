@@ -203,17 +203,12 @@ class TakenForTheRacks(ConservativeController):
         """
         super().__init__(**options)
         self.band = band
-        self._floor: FloorMap | None = None
-
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
-        super().reset(floor, route, robot, params)
-        self._floor = floor
 
     def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
         if (
             human is not None
-            and self._floor is not None
-            and self._floor.obstacle_clearance(human.position) < self.band
+            and self.floor is not None
+            and self.floor.obstacle_clearance(human.position) < self.band
         ):
             return False
         return super().human_threatens(time, robot, human)
@@ -267,16 +262,11 @@ class PriorityAtCrossings(ConservativeController):
         """
         super().__init__(**options)
         self.open_clearance = open_clearance
-        self._floor: FloorMap | None = None
-
-    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
-        super().reset(floor, route, robot, params)
-        self._floor = floor
 
     def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
         at_crossing = (
-            self._floor is not None
-            and self._floor.obstacle_clearance(np.array([robot.x, robot.y])) > self.open_clearance
+            self.floor is not None
+            and self.floor.obstacle_clearance(np.array([robot.x, robot.y])) > self.open_clearance
         )
         if human is not None and at_crossing:
             forward, left = to_body_frame(human.position, robot.x, robot.y, robot.heading)
