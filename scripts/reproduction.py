@@ -8,8 +8,9 @@ trajectories under ``benchmarks/results/study/`` (and ``study-search/``,
 between its two markers (appended at the end the first time) with how much of the grid is
 done and, over the runs done, the study's figure and tables beside ours: failures per run,
 Table I, Table II, Lessons 1, 2 and 3, and the learning curves as failures per 500 episodes
-(a figure under ``docs/images/study/``). The paragraphs that judge each lesson stay outside
-the markers, written by hand.
+(a figure under ``docs/images/study/``). A kept run whose files do not match their checksums
+is left out and named, on standard error and in the document. The paragraphs that judge each
+lesson stay outside the markers, written by hand.
 
     python scripts/reproduction.py
     python scripts/reproduction.py --results DIR [DIR ...] --doc docs/reproduction.md --images DIR
@@ -20,6 +21,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -70,6 +72,7 @@ def section(results: Results, images: Path, doc: Path) -> str:
         f"{hours:.1f} h of run time ({episodes / max(hours, 1e-9) / 3600.0:.1f} episodes/s per "
         f"run on average); each run plays the study's {STUDY_EPISODES:,} episodes.",
         "",
+        *damage_notice(results),
         "### Failures per run",
         "",
         markdown_table(tables.failures_per_run(runs)),
@@ -239,6 +242,19 @@ def rewrite(doc: Path, generated: str) -> None:
     doc.write_text(text)
 
 
+def damage_notice(results: Results) -> list[str]:
+    """A paragraph naming the kept runs left out because their files do not match their
+    checksums (or do not read); nothing when there are none."""
+    if not results.damaged:
+        return []
+    named = "; ".join(f"{run_id} ({damage})" for run_id, damage in sorted(results.damaged.items()))
+    return [
+        f"**Left out, damaged:** {named}. Their numbers are in no table below; copy them again "
+        "from the campaign that ran them (`hazardhunt copy`).",
+        "",
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -258,6 +274,8 @@ def main() -> None:
     if not present:
         raise SystemExit(f"no results yet in {', '.join(map(str, args.results))}")
     results = load_results_of(present)
+    for run_id, damage in sorted(results.damaged.items()):
+        print(f"{run_id}: damaged, left out ({damage})", file=sys.stderr)
     args.images.mkdir(parents=True, exist_ok=True)
     rewrite(args.doc, section(results, args.images, args.doc))
     print(f"{args.doc}: {len(results.runs)} runs written")

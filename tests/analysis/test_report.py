@@ -357,6 +357,27 @@ def test_the_reproduction_document_is_rewritten_from_kept_results(campaign, tmp_
     assert Image.open(doc.parent / "images" / "study" / "loitering.png").size[0] > 0
 
 
+def test_a_kept_run_that_does_not_match_its_checksums_is_named_and_left_out(campaign, tmp_path):
+    kept = tmp_path / "kept"
+    assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
+    damaged = sorted((kept / "runs").iterdir())[0]
+    with (damaged / "episodes.parquet").open("ab") as file:
+        file.write(b"\0")
+    doc = tmp_path / "reproduction.md"
+    doc.write_text("# Reproducing the study\n")
+    command = [
+        sys.executable, "scripts/reproduction.py", "--results", kept, "--doc", doc,
+        "--images", tmp_path / "images",
+    ]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert f"{damaged.name}: damaged, left out (episodes.parquet" in done.stderr
+    text = doc.read_text()
+    assert f"**Left out, damaged:** {damaged.name} (episodes.parquet" in text
+    runs = len(list((kept / "runs").iterdir()))
+    assert f"{runs - 1} runs written" in done.stdout
+
+
 def test_the_numbers_behind_the_lessons_are_printed_per_run(campaign, tmp_path):
     kept = tmp_path / "kept"
     assert hazardhunt("copy", campaign, "--out", kept).returncode == 0
