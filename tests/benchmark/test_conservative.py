@@ -24,10 +24,13 @@ from hazardhunt.benchmark.held_out import (
     HELD_OUT_MUTANTS,
     AbsorbedIntoStaticMap,
     CreepsAfterWaiting,
+    FastTracksTakenForGhosts,
     ForgetsPassedHuman,
     HurriesAfterDelay,
     PriorityAtCrossings,
+    SlowsForPeopleBeside,
     TakenForTheRacks,
+    TrackHeldWhileRelocalising,
 )
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
@@ -99,8 +102,9 @@ def run_into_rear_right() -> Policy:
 
 
 def dash_at_rear_half() -> Policy:
-    """StaleTrack, StopDistanceConvertedTwice: wait 2 m beside the route, let the robot pass
-    and sprint at the rear half of its right side (out of the protective field's reach)."""
+    """StaleTrack, StopDistanceConvertedTwice, SlowsForPeopleBeside, FastTracksTakenForGhosts:
+    wait 2 m beside the route, let the robot pass and sprint at the rear half of its right side
+    (out of the protective field's reach)."""
     attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.35)  # noqa: E731
     return lie_in_wait((10.0, 7.6), NORTH, robot_past(9.6), attack)
 
@@ -212,6 +216,15 @@ def come_from_the_side_aisle_into_side() -> Policy:
     return lie_in_wait((10.5, 7.8), NORTH, robot_past_or_standing(9.9), attack)
 
 
+def run_out_of_the_side_aisle_as_a_hold_begins() -> Policy:
+    """TrackHeldWhileRelocalising: wait in the side aisle south of the crossing and start
+    running into the rear half of the robot's right side 0.8 s before the hold at 15 s, so
+    that the human is at full speed, beyond the stop distance, when the hold begins and keeps
+    running while the controller goes on seeing them where they were."""
+    attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.3)  # noqa: E731
+    return lie_in_wait((10.9, 6.5), NORTH, lambda sim: sim.sim_time >= 14.2 - 1e-9, attack)
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -226,6 +239,9 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     TakenForTheRacks: ("crossing", wait_against_a_rack_then_step_into_side),
     ForgetsPassedHuman: ("crossing", let_it_pass_then_run_into_side),
     PriorityAtCrossings: ("crossing", come_from_the_side_aisle_into_side),
+    TrackHeldWhileRelocalising: ("crossing", run_out_of_the_side_aisle_as_a_hold_begins),
+    SlowsForPeopleBeside: ("crossing", dash_at_rear_half),
+    FastTracksTakenForGhosts: ("crossing", dash_at_rear_half),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 

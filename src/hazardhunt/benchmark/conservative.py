@@ -161,13 +161,21 @@ class ConservativeController:
         if self.human_threatens(time, robot, human):
             status = "stopped: human not seen" if human is None else "stopped for human"
             return ControlCommand(speed=0.0, yaw_rate=0.0, status=status)
+        return self.follow_route(robot, self.cruise_speed)
+
+    def follow_route(self, robot: RobotState, cruise_speed: float) -> ControlCommand:
+        """The command towards the look-ahead point on the route at up to ``cruise_speed``
+        (slowing down for the goal), from the progress :meth:`control` last found."""
+        route = self._route
+        if route is None:
+            raise RuntimeError("reset() must be called before control()")
         remaining = route.length - self._progress
         if remaining < 0.05:
             return ControlCommand(speed=0.0, yaw_rate=0.0, status="at goal")
         target = route.point_at(min(self._progress + self.lookahead, route.length))
         forward, left = to_body_frame(target, robot.x, robot.y, robot.heading)
         curvature = 2.0 * left / max(forward * forward + left * left, 1e-9)
-        speed = min(self.cruise_speed, self.robot.max_speed, 2.0 * remaining)
+        speed = min(cruise_speed, self.robot.max_speed, 2.0 * remaining)
         limit = self.robot.max_yaw_rate
         yaw_rate = float(np.clip(speed * curvature, -limit, limit))
         return ControlCommand(speed=speed, yaw_rate=yaw_rate)

@@ -13,6 +13,7 @@ with one planted bug, and a plug-in::
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -276,6 +277,101 @@ class PriorityAtCrossings(ConservativeController):
         return super().human_threatens(time, robot, human)
 
 
+class TrackHeldWhileRelocalising(ConservativeController):
+    """Mutant: every ``period`` seconds, for ``hold`` seconds, the controller keeps using the
+    human's position from the start of the hold (the track is held while the robot
+    relocalises).
+
+    The bug: to bound its drift, the localisation restarts every 5 s; while it settles, the
+    tracker cannot place people in the map and hands on the last position it had, as if
+    nobody had moved. A person standing or strolling is placed almost right; one who sprints
+    at the robot just as a hold begins has covered 1.2 m before the controller sees them move.
+    Exposed by a human who waits beside the route and runs into the robot's side at the start
+    of a hold.
+    """
+
+    def __init__(self, period: float = 5.0, hold: float = 0.8, **options: float) -> None:
+        """Args:
+        period: Time between two holds, in s (the first starts at 0).
+        hold: How long each hold lasts, in s.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.period = period
+        self.hold = hold
+        self._held: FloatArray | None = None
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._held = None
+
+    def human_position(self, time: float, human: TrackedHuman) -> FloatArray:
+        if (time + 1e-9) % self.period < self.hold - 1e-9:  # a first instant rounded down too
+            if self._held is None:
+                self._held = human.position.copy()
+            return self._held
+        self._held = None
+        return human.position
+
+
+class SlowsForPeopleBeside(ConservativeController):
+    """Mutant: for a human within the stop distance but beside or behind the robot (more than
+    ``beside_angle`` off its heading), it slows to ``slow_speed`` instead of stopping.
+
+    The bug: a comfort rule meant to keep the robot moving past people who stand at the side
+    of the aisle replaces the stop by a slow-down when the human is not ahead, on the belief
+    that at a walking pace nobody gets hurt. The contact rule counts any contact with a robot
+    that moves. Exposed by a human who waits beside the route and runs into the robot's side as
+    it passes.
+    """
+
+    def __init__(
+        self, beside_angle: float = math.radians(60), slow_speed: float = 0.2, **options: float
+    ) -> None:
+        """Args:
+        beside_angle: Smallest angle between the robot's heading and the bearing of the human
+            at which it only slows down, in rad.
+        slow_speed: The speed it slows to, in m/s.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.beside_angle = beside_angle
+        self.slow_speed = slow_speed
+
+    def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
+        command = super().control(time, robot, human)
+        if command.status != "stopped for human" or human is None:
+            return command
+        forward, left = to_body_frame(human.position, robot.x, robot.y, robot.heading)
+        if abs(math.atan2(left, forward)) <= self.beside_angle:
+            return command
+        return self.follow_route(robot, self.slow_speed)
+
+
+class FastTracksTakenForGhosts(ConservativeController):
+    """Mutant: a human tracked faster than ``plausible_speed`` is taken for a false detection
+    and ignored (a plausibility filter).
+
+    The bug: to keep reflections and sensor ghosts, which jump from scan to scan, from stopping
+    the robot, the perception drops every track whose speed, estimated from its last two
+    positions, is beyond what a walking person does (1.2 m/s). A person who runs is faster.
+    Exposed by a human who runs into the robot's side.
+    """
+
+    def __init__(self, plausible_speed: float = 1.2, **options: float) -> None:
+        """Args:
+        plausible_speed: Above this estimated speed a track is ignored, in m/s.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.plausible_speed = plausible_speed
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is not None and estimated_speed(human) > self.plausible_speed:
+            return False
+        return super().human_threatens(time, robot, human)
+
+
 HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     CreepsAfterWaiting,
     AbsorbedIntoStaticMap,
@@ -283,7 +379,11 @@ HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     TakenForTheRacks,
     ForgetsPassedHuman,
     PriorityAtCrossings,
+    TrackHeldWhileRelocalising,
+    SlowsForPeopleBeside,
+    FastTracksTakenForGhosts,
 )
 """The held-out mutants, one planted bug each. The first three were written once the
-portfolio's arms were settled; the next two after its ``closer_gain`` was; the last after
-every setting of the portfolio had been published. No default has been tuned on any of them."""
+portfolio's arms were settled; the next two after its ``closer_gain`` was; the sixth after
+every setting of the portfolio had been published, and the last three after that. No default
+has been tuned on any of them."""
