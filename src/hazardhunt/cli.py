@@ -822,7 +822,8 @@ def new_sut(
     cls=_Command,
     help="Estimate the probability of a failure per encounter when people behave as a model of "
     "them says and the SUT's sensors and brake vary as a model of its uncertainties says "
-    "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate. Exits "
+    "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate; with "
+    "a larger --episodes, to add episodes to a plain Monte Carlo one. Exits "
     "with code 1 when every episode ended in a SUT error (nothing was tested); 2 for bad input, "
     "before anything runs.",
 )
@@ -848,8 +849,9 @@ def estimate_command(
         int | None,
         typer.Option(
             help="Episodes per batch (ce: the proposal moves between batches; splitting: "
-            "samples per level) \\[default: 200, or fewer where --episodes would not give the "
-            "method its fewest batches: 1 for mc, 3 for ce, 2 for splitting]."
+            "samples per level) \\[default: the resumed estimate's; else 200, or fewer where "
+            "--episodes would not give the method its fewest batches: 1 for mc, 3 for ce, 2 "
+            "for splitting]."
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the estimate.")] = 0,
@@ -881,10 +883,11 @@ def estimate_command(
         EstimateConfig,
         EstimateRun,
         default_batch_size,
+        resumed_batch_size,
     )
 
     if batch_size is None:
-        batch_size = default_batch_size(method, episodes)
+        batch_size = resumed_batch_size(out, method) or default_batch_size(method, episodes)
 
     config = _validated(
         lambda: EstimateConfig(

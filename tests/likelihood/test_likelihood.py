@@ -338,6 +338,50 @@ def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
     )
     with pytest.raises(ValueError, match=r"another configuration \(seed: there 0, here 1\)"):
         EstimateRun(other, tmp_path, source=toy)
+    other = EstimateConfig(episodes=300, estimator=EstimatorParams(method="mc", batch_size=100))
+    with pytest.raises(ValueError, match=r"\(estimator\.method: there 'ce', here 'mc'\)"):
+        EstimateRun(other, tmp_path, source=toy)
+
+
+def mc_config(episodes, batch_size=100, method="mc"):
+    return EstimateConfig(
+        episodes=episodes, seed=3, estimator=EstimatorParams(method=method, batch_size=batch_size)
+    )
+
+
+def test_a_larger_budget_extends_a_monte_carlo_estimate_with_the_episodes_it_would_have_played(
+    tmp_path,
+):
+    toy = ClosedFormEncounters()
+    whole = EstimateRun(mc_config(500), tmp_path / "whole", source=toy).run()
+    EstimateRun(mc_config(300), tmp_path / "grown", source=toy).run()
+    (tmp_path / "grown" / "estimate.json").write_text("{}")  # as the smaller budget left it
+    grown = EstimateRun(mc_config(500), tmp_path / "grown", source=toy).run()
+    pd.testing.assert_frame_equal(grown, whole)
+    assert not (tmp_path / "grown" / "estimate.json").exists()  # stale: written anew at the end
+    assert json.loads((tmp_path / "grown" / "config.json").read_text())["episodes"] == 500
+
+
+@pytest.mark.parametrize(
+    ("first", "then", "said"),
+    [
+        (mc_config(300, method="ce"), mc_config(500, method="ce"), "a ce estimate plans its"),
+        (mc_config(250), mc_config(500), "whose last batch has 50 episodes, not 100"),
+        (mc_config(300), mc_config(200), "more than 200; give --episodes 300 or more"),
+    ],
+    ids=["cross-entropy", "short last batch", "smaller"],
+)
+def test_an_estimate_that_cannot_be_extended_so_is_refused_and_left_as_it_was(
+    tmp_path, first, then, said
+):
+    toy = ClosedFormEncounters()
+    EstimateRun(first, tmp_path, source=toy).run()
+    before = sorted(p.name for p in (tmp_path / "batches").iterdir())
+    with pytest.raises(ValueError, match=said) as error:
+        EstimateRun(then, tmp_path, source=toy)
+    assert "\n" not in str(error.value)
+    assert sorted(p.name for p in (tmp_path / "batches").iterdir()) == before
+    assert json.loads((tmp_path / "config.json").read_text())["episodes"] == first.episodes
 
 
 def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_draws_it(tmp_path):
@@ -373,6 +417,14 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert page.count("data:image/png") >= 2  # the convergence and a most likely failure
     assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
     damaged_estimates_are_named_and_mend(tmp_path / "est", done.args[3:])
+    # More episodes for the same estimate: its batch size is kept without --batch-size.
+    command = [*done.args[3:]]
+    command[command.index("--episodes") + 1] = "150"
+    del command[command.index("--batch-size") : command.index("--batch-size") + 2]
+    grown = hazardhunt(*command, cwd=ROOT)
+    assert grown.returncode == 0, grown.stderr
+    assert json.loads((tmp_path / "est" / "estimate.json").read_text())["episodes"] == 150
+    assert len(list((tmp_path / "est" / "batches").glob("*.parquet"))) == 3
 
 
 def damaged_estimates_are_named_and_mend(directory, command):

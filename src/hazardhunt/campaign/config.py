@@ -679,10 +679,18 @@ def read_stored_campaign(path: Path) -> CampaignConfig | None:
 
 def first_difference(stored: BaseModel, given: BaseModel) -> str:
     """The first setting in which two configurations of one kind differ, as ``key: there X,
-    here Y`` (``stored`` is there, ``given`` here)."""
-    stored_values, given_values = stored.model_dump(mode="json"), given.model_dump(mode="json")
-    key = next(k for k in stored_values if stored_values[k] != given_values.get(k))
-    return f"{key}: there {stored_values[key]!r}, here {given_values.get(key)!r}"
+    here Y`` (``stored`` is there, ``given`` here); a setting within a table is named by its
+    dotted path (``estimator.method: there 'mc', here 'ce'``)."""
+    there: Any = stored.model_dump(mode="json")
+    here: Any = given.model_dump(mode="json")
+    path = []
+    while isinstance(there, dict) and isinstance(here, dict):
+        key = next((k for k in (*there, *here) if there.get(k) != here.get(k)), None)
+        if key is None:
+            break
+        path.append(key)
+        there, here = there.get(key), here.get(key)
+    return f"{'.'.join(path) or 'settings'}: there {there!r}, here {here!r}"
 
 
 def check_output_location(out: Path, option: str = "--out") -> None:

@@ -96,6 +96,17 @@ BATCHES_AT_LEAST: dict[str, int] = {"mc": 1, "ce": 3, "splitting": 2}
 """The fewest batches (levels, for ``splitting``) each method needs to give an interval."""
 
 
+def resumed_batch_size(directory: Path, method: str) -> int | None:
+    """The batch size of the estimate by ``method`` in ``directory``, which a command that
+    resumes or extends it keeps unless told otherwise; None when there is none (or its
+    configuration does not read: the run says so)."""
+    try:
+        found = load_config(directory)
+    except InputError:
+        return None
+    return found.estimator.batch_size if found.estimator.method == method else None
+
+
 def default_batch_size(method: str, episodes: int) -> int:
     """The batch size of an estimate that names none: the estimator's 200, or fewer where the
     budget would not give ``method`` its fewest batches (:data:`BATCHES_AT_LEAST`), never
@@ -318,24 +329,56 @@ def _write_batch(directory: Path, batch: int, table: pd.DataFrame, record: dict[
 
 
 def _claim(directory: Path, config: EstimateConfig) -> None:
-    """Write ``config.json``, or check that the one there is this estimate's."""
+    """Write ``config.json``, or check that the one there is this estimate's: the same, or a
+    plain Monte Carlo estimate whose budget this one extends (:func:`_check_extension`)."""
     path = directory / "config.json"
     wanted = config.model_dump(mode="json")
     if path.exists():
         # Read as a configuration, so that settings added since it was written take their
         # defaults: an estimate of an earlier version resumes.
         found = load_config(directory)
-        if found.model_dump(mode="json") != wanted:
+        if found.model_dump(mode="json") == wanted:
+            return
+        if found.model_copy(update={"episodes": config.episodes}).model_dump(mode="json") != wanted:
             raise InputError(
                 f"{directory}: holds an estimate of another configuration "
                 f"({first_difference(found, config)}); choose another --out or give the same "
                 "options to resume it"
             )
-        return
+        _check_extension(directory, found, config)
+        # The result of the smaller budget no longer describes the directory.
+        (directory / "estimate.json").unlink(missing_ok=True)
     directory.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(wanted, indent=1) + "\n")
     partial.replace(path)
+
+
+def _check_extension(directory: Path, found: EstimateConfig, config: EstimateConfig) -> None:
+    """Raises InputError unless ``config``, which differs from the estimate ``found`` in
+    ``directory`` in its budget alone, extends it: a plain Monte Carlo estimate given more
+    episodes, all of whose batches so far are whole, so that the episodes it adds are those an
+    estimate of the larger budget plays from the start (each batch drawn from the seed and
+    its number)."""
+    there = f"{directory}: holds an estimate of {found.episodes:,} episodes"
+    if config.estimator.method != "mc":
+        raise InputError(
+            f"{there}, not {config.episodes:,}; a {config.estimator.method} estimate plans its "
+            "batches from its budget and cannot be extended: choose another --out, or give "
+            f"--episodes {found.episodes} to resume it"
+        )
+    if config.episodes < found.episodes:
+        raise InputError(
+            f"{there}, more than {config.episodes:,}; give --episodes {found.episodes} or more "
+            "to resume or extend it, or choose another --out"
+        )
+    size = config.estimator.batch_size
+    short = [len(table) for table in played_batches(directory) if len(table) != size]
+    if short:
+        raise InputError(
+            f"{there}, whose last batch has {short[0]} episodes, not {size}: more episodes "
+            "would not be the ones an estimate of that budget plays; choose another --out"
+        )
 
 
 def load_config(directory: Path) -> EstimateConfig:
