@@ -29,6 +29,11 @@ from hazardhunt.world.geometry import FloatArray, point_rectangle_clearance, to_
 FEET_PER_METRE = 1 / 0.3048
 """Feet in one metre."""
 
+STOPPED_FOR_HUMAN = "stopped for human"
+"""The status of a stop for a human within the stop distance."""
+STOPPED_UNSEEN = "stopped: human not seen"
+"""The status of a stop because the human is not seen."""
+
 
 @dataclass(frozen=True)
 class StopBudget:
@@ -159,7 +164,7 @@ class ConservativeController:
             np.array([robot.x, robot.y]), self._progress, self._progress + 2.0
         )
         if self.human_threatens(time, robot, human):
-            status = "stopped: human not seen" if human is None else "stopped for human"
+            status = STOPPED_UNSEEN if human is None else STOPPED_FOR_HUMAN
             return ControlCommand(speed=0.0, yaw_rate=0.0, status=status)
         return self.follow_route(robot, self.cruise_speed)
 

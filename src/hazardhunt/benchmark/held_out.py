@@ -17,7 +17,12 @@ import math
 
 import numpy as np
 
-from hazardhunt.benchmark.conservative import ConservativeController, estimated_speed
+from hazardhunt.benchmark.conservative import (
+    STOPPED_FOR_HUMAN,
+    STOPPED_UNSEEN,
+    ConservativeController,
+    estimated_speed,
+)
 from hazardhunt.sut.protocols import ControlCommand, RobotParams, RobotState, TrackedHuman
 from hazardhunt.sut.route import Route
 from hazardhunt.world.floor import FloorMap
@@ -179,7 +184,7 @@ class HurriesAfterDelay(ConservativeController):
         if hurrying:  # the route is followed faster; the stop distance stays as it was
             self.cruise_speed = self.catch_up_speed
         command = super().control(time, robot, human)
-        if command.status in ("stopped for human", "stopped: human not seen"):
+        if command.status in (STOPPED_FOR_HUMAN, STOPPED_UNSEEN):
             self._stood += elapsed
         elif hurrying and command.speed > 0.0:
             return dataclasses.replace(command, status="catching up")
@@ -340,7 +345,7 @@ class SlowsForPeopleBeside(ConservativeController):
 
     def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
         command = super().control(time, robot, human)
-        if command.status != "stopped for human" or human is None:
+        if command.status != STOPPED_FOR_HUMAN or human is None:
             return command
         forward, left = to_body_frame(human.position, robot.x, robot.y, robot.heading)
         if abs(math.atan2(left, forward)) <= self.beside_angle:
