@@ -8,7 +8,10 @@ episodes, the share of timeouts, the mean simulated episode and the risk summed 
 without a failure; then the simulated hours, failures per simulated hour, the share of
 failures with a standing human, time in the field, stalls and timeouts; and for a portfolio run,
 per arm the episodes it played and the failures it found, and the arm that found each class
-first.
+first. After the runs: per class, the failures each arm of the portfolio runs found, over all of
+them; and per case (scenario, field) the classes that all runs given found together and the runs
+that found every one of them (give the study's and the portfolio's results together to compare
+the testers on it).
 
     python scripts/study_numbers.py
     python scripts/study_numbers.py --results DIR [DIR ...] --block 2000 --long-block 5000
@@ -21,8 +24,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from hazardhunt.analysis.results import load_results_of
+from hazardhunt.analysis.results import Results, load_results_of
 from hazardhunt.analysis.verdict import ARMS_FILE, episode_arms
+from hazardhunt.spec.failure_classes import OTHER
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -81,6 +85,37 @@ def describe_arms(episodes: pd.DataFrame, failures: pd.DataFrame, directory: Pat
     return f"  arms (episodes, failures): {shares}\n  first of each class: {finders}"
 
 
+def classes_by_arm(results: Results) -> dict[str, dict[str, int]]:
+    """Per class, the failures each portfolio arm found, over every portfolio run given."""
+    found: dict[str, dict[str, int]] = {}
+    for run_id, directory in zip(results.runs["run_id"], results.runs["directory"], strict=True):
+        played = episode_arms(Path(directory) / ARMS_FILE)
+        if not played:  # not a portfolio run
+            continue
+        own = results.failures[results.failures["run_id"] == run_id]
+        for name, episode in zip(own["class"].astype(str), own["episode"], strict=True):
+            per_arm = found.setdefault(name, {})
+            arm = played.get(int(episode), "unknown")
+            per_arm[arm] = per_arm.get(arm, 0) + 1
+    return found
+
+
+def union_reached(results: Results) -> list[str]:
+    """Per case, the lines on the classes all runs found together and the runs that found all."""
+    named = results.failures[results.failures["class"].astype(str) != OTHER]
+    lines = []
+    for (scenario, field), runs in results.runs.groupby(["scenario", "field"], sort=True):
+        case = named[(named["scenario"] == scenario) & (named["field"] == field)]
+        union = set(case["class"].astype(str))
+        reached = [
+            run_id
+            for run_id in sorted(runs["run_id"])
+            if set(case.loc[case["run_id"] == run_id, "class"].astype(str)) == union
+        ]
+        lines.append(f"{scenario} / {field}: {len(union)} classes; all of them: {reached}")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     default = REPOSITORY / "benchmarks" / "results" / "study"
@@ -98,6 +133,14 @@ def main() -> None:
         arms = describe_arms(episodes, failures, Path(directories[run_id]))
         if arms:
             print(arms)
+    by_arm = classes_by_arm(results)
+    if by_arm:
+        print("failures per class and arm, over every portfolio run")
+        for name, per_arm in sorted(by_arm.items()):
+            print(f"  {name}: {dict(sorted(per_arm.items(), key=lambda item: -item[1]))}")
+    print("classes per case, of every run given together")
+    for line in union_reached(results):
+        print(f"  {line}")
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from hazardhunt.campaign.store import find_damage
@@ -69,3 +70,32 @@ def test_the_portfolio_runs_arms_are_printed_and_add_up_to_each_run():
         assert sum(int(episodes) for _, episodes, _ in played) == summary["episodes"]
         assert sum(int(failures) for _, _, failures in played) == summary["failures"]
         assert "  first of each class: {" in block
+    # Over every run: each class's failures by arm add up to its failures in the kept runs.
+    failures = pd.concat(
+        pd.read_parquet(run / "failures.parquet") for run in (PORTFOLIO / "runs").iterdir()
+    )
+    per_class = failures["class"].astype(str).value_counts()
+    by_arm = done.stdout.split("failures per class and arm, over every portfolio run\n", 1)[1]
+    for name, count in per_class.items():
+        line = re.search(rf"  {re.escape(name)}: \{{(.*)\}}\n", by_arm)
+        assert line is not None, name
+        assert sum(int(n) for n in re.findall(r": (\d+)", line.group(1))) == count
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not PORTFOLIO.is_dir(), reason="no kept portfolio runs")
+def test_the_runs_that_found_every_class_of_their_case_are_printed_as_the_document_counts_them():
+    done = subprocess.run(
+        [sys.executable, "scripts/study_numbers.py", "--results", KEPT, PORTFOLIO],
+        cwd=ROOT, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    reached = re.findall(r"classes; all of them: \[(.*)\]", done.stdout)
+    assert len(reached) == 9
+    # docs/reproduction.md, "The portfolio over the nine cases": cases where the run of seed 0
+    # found every class that any run of the case found.
+    counts = {
+        tester: sum(f"__{tester}__seed0" in line for line in reached)
+        for tester in ("portfolio", "random", "ppo-acc", "ppo-max")
+    }
+    assert counts == {"portfolio": 8, "random": 5, "ppo-acc": 7, "ppo-max": 6}
