@@ -161,7 +161,8 @@ def score(runs: list[dict[str, Any]], args: argparse.Namespace) -> list[dict[str
 
 def totals(runs: list[dict[str, Any]], args: argparse.Namespace) -> list[dict[str, Any]]:
     """Per tester and field, over every seed and scenario: the mutant pairs killed within both
-    budgets, and the median episode of the first failure over the pairs killed."""
+    budgets, the median episode of the first failure over the pairs killed, and the failures
+    found against the mutants."""
     rows = []
     for tester in args.testers:
         for field in args.fields:
@@ -180,6 +181,7 @@ def totals(runs: list[dict[str, Any]], args: argparse.Namespace) -> list[dict[st
                     "killed_early": killed_within(mutants, args.early),
                     "killed": killed_within(mutants, args.episodes),
                     "median_first_failure": statistics.median(found) if found else None,
+                    "failures": sum(r["failures"] for r in mutants),
                 }
             )
     return rows
@@ -208,7 +210,7 @@ def print_tables(
         print(
             f"{row['tester']:14} {row['field']:6} {row['killed_early']:>4d} / "
             f"{row['killed']:<3d} of {row['pairs']:<4d} median first failure "
-            f"{'-' if median is None else f'{median:g}'}"
+            f"{'-' if median is None else f'{median:g}'}, {row['failures']} failures"
         )
     print("\nepisode of the first failure per SUT ('-': none within the budget)")
     columns = [

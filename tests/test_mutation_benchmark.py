@@ -33,6 +33,10 @@ def test_the_benchmark_scores_a_tester_and_writes_its_results(tmp_path):
     (score,) = written["scores"]
     assert score["false_alarms"] == 0
     assert score["scenarios"]["head-on"]["mutants"] == 1
+    (total,) = written["totals"]
+    mutant_runs = [run for run in written["runs"] if run["sut"] == "BlindRightRear"]
+    assert total["failures"] == sum(run["failures"] for run in mutant_runs)
+    assert f"{total['failures']} failures" in result.stdout
 
 
 def test_a_tester_that_cannot_be_configured_stops_the_benchmark_before_it_runs(tmp_path):
