@@ -36,6 +36,7 @@ from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import build_controller
 from hazardhunt.sut.protocols import RobotState, TrackedHuman
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS
+from hazardhunt.testers.spaces import DecisionSpace
 from hazardhunt.world.bodies import RobotParams
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS, Pose, Scenario, load_scenario
 from tests.scripted import (
@@ -298,6 +299,25 @@ def test_with_the_human_away_the_robot_reaches_its_goal(name, field):
 def test_no_scripted_human_makes_the_original_fail(attack, name, field):
     result = run(make(name, field, ConservativeController()), ATTACKS[attack]())
     assert result.outcome != "failure", result.summary
+
+
+@pytest.mark.parametrize("field", list(FIELD_SETTINGS))
+@pytest.mark.parametrize("name", BUILTIN_SCENARIOS)
+def test_no_plain_ambush_makes_the_original_fail(name, field):
+    # The searchers' own ambushes (wait beside the route, run at the robot's side as it
+    # passes), at the default decision period; the units slip falls to some of them.
+    space = DecisionSpace("ambush", detour=True)
+    failures = {}
+    for controller in (ConservativeController(), StopDistanceConvertedTwice()):
+        simulation = Simulation.build(name, field, controller=controller)
+        outcomes = [
+            space.play(simulation, plan, False).summary.outcome
+            for plan in space.plain_attacks(simulation.horizon)
+        ]
+        failures[type(controller).__name__] = outcomes.count("failure")
+    assert failures["ConservativeController"] == 0
+    if field == "none":
+        assert failures["StopDistanceConvertedTwice"] > 0
 
 
 @pytest.mark.parametrize("field", list(FIELD_SETTINGS))

@@ -10,6 +10,7 @@ from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.descriptors import measures_of
 from hazardhunt.sut.pursuit import PursuitController
 from hazardhunt.testers.aim import (
+    LEAD_MAX,
     ROUTE_OFFSET_MAX,
     STANDOFF_MAX,
     aim_point,
@@ -81,12 +82,14 @@ def test_the_slowest_aim_stands_and_turns_to_face_the_point(sim):
 
 def test_an_aimed_episode_replays_from_the_actions_it_records():
     sim = Simulation.build("crossing", "1.25m", controller=PursuitController())
-    aims = np.random.default_rng(0).uniform(-1.0, 1.0, (sim.horizon, 3))
-    for space, clear_path in [("aim", False), ("aim", True), ("route", False), ("route", True)]:
-        result = DecisionSpace(space, clear_path).play(sim, aims, False)
-        replayed = sim.simulate(result.actions, keep_trajectory=False)
-        assert replayed.summary == result.summary
-        np.testing.assert_array_equal(replayed.actions, result.actions)
+    rng = np.random.default_rng(0)
+    for kind in ("aim", "route", "ambush"):
+        for clear_path in (False, True):
+            space = DecisionSpace(kind, clear_path)
+            result = space.play(sim, rng.uniform(-1.0, 1.0, (sim.horizon, space.size)), False)
+            replayed = sim.simulate(result.actions, keep_trajectory=False)
+            assert replayed.summary == result.summary
+            np.testing.assert_array_equal(replayed.actions, result.actions)
 
 
 def test_a_route_point_lies_beside_the_route_at_its_share(sim):
@@ -139,3 +142,27 @@ def test_with_clear_path_a_human_walks_round_a_shelf_to_its_route_point():
     assert walked.summary.contact_face == "front"
     floor, radius = sim.scenario.floor, sim.human_params.radius
     assert not any(floor.disc_blocked_at(s.human_x, s.human_y, radius) for s in walked.trajectory)
+
+
+def test_an_ambush_waits_beside_the_route_until_the_robot_comes_abreast_then_runs_at_its_side(sim):
+    # Half way along the route, 3 m to its right (south), running when the robot's centre is
+    # 1.5 m short of abreast, at the middle of the robot's side.
+    ambush = np.array([1.0, 0.0, -1.0, 0.5, 0.0])
+    waiting_point = route_point(sim, 0.5, -ROUTE_OFFSET_MAX)
+    trigger = 0.5 * sim.route.length - 0.5 * LEAD_MAX
+    space = DecisionSpace("ambush")
+    sim.reset()
+    ran = False
+    while sim.route.project(np.array([sim.robot.x, sim.robot.y])) < trigger:
+        outcome = sim.decide(space.action(sim, ambush)).outcome
+        assert outcome is None
+    # Waiting: where the decision said, and the robot, which ignores the human, not yet near.
+    np.testing.assert_allclose(sim.human_position, waiting_point, atol=0.05)
+    while (outcome := sim.decide(space.action(sim, ambush)).outcome) is None:
+        ran = True
+    assert ran
+    result = sim.result(keep_trajectory=False)
+    assert (outcome, result.summary.contact_face) == ("failure", "right")
+    # Mirrored, it waits on the left and meets the robot's left side.
+    mirrored = DecisionSpace("ambush").mirrored(np.tile(ambush, (sim.horizon, 1)))
+    assert DecisionSpace("ambush").play(sim, mirrored, False).summary.contact_face == "left"

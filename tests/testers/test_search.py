@@ -84,7 +84,13 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("qd", {"algorithm": "nsga"}, "algorithm: must be 'cma-me', 'cma-mae' or 'map-elites'"),
         ("qd", {"es": "adam"}, "es: must be 'cma_es', 'sep_cma_es' or 'lm_ma_es'"),
         ("qd", {"clear_path": "yes"}, 'space.detour: must be true or false, not "yes"'),
-        ("cem", {"space": "sideways"}, "space.kind: must be 'open', 'aim', 'route' or 'mixed'"),
+        (
+            "cem",
+            {"space": "sideways"},
+            "space.kind: must be one of open, aim, route, ambush, mixed",
+        ),
+        ("qd", {"space": {"kind": ["aim", "aim"]}}, "space.kind: a list of kinds names each of"),
+        ("cem", {"space": {"kind": ["mixed"]}}, r"space.kind: .* not \['mixed'\]"),
         ("cem", {"space": {"kind": "aim", "detours": True}}, "space.detours: unknown setting"),
         ("cem", {"space": 3, "clear_path": True}, "space: must be a table, not 3"),
         ("cem", {"noise_exponent": -1}, "noise_exponent: must be greater than or equal to 0"),
@@ -146,7 +152,7 @@ def test_qd_with_a_diagonal_covariance_searches_and_says_so(tmp_path):
     assert len(pd.read_parquet(directory / "tester" / "archive.parquet")) > 1
 
 
-@pytest.mark.parametrize("space", ["aim", "mixed"])
+@pytest.mark.parametrize("space", ["aim", "mixed", ["ambush", "aim"]])
 def test_qd_over_closed_loop_decisions_finds_failures_that_replay_from_their_actions(
     space, tmp_path
 ):
@@ -214,7 +220,7 @@ def test_the_plain_attacks_hold_one_decision_at_top_speed():
         assert (plans[:, :, 0] == 1.0).all()
         assert (plans == plans[:, :1, :]).all()  # one decision throughout
         assert len(np.unique(plans[:, 0], axis=0)) == len(plans)  # no two alike
-    assert counts == {"open": 3, "aim": 12, "route": 9}
+    assert counts == {"open": 3, "aim": 12, "route": 9, "ambush": 18}
     # Among the aimed ones: walk into the robot's left and right sides; among the route's: stand
     # on it at its goal.
     aimed = DecisionSpace("aim").plain_attacks(1)[:, 0].tolist()

@@ -22,6 +22,14 @@ beside it (+-1: ``ROUTE_OFFSET_MAX`` to the left or right). The human walks ther
 which is how it stands in the robot's way, or waits where the robot will be late in its
 mission (docking at the goal, say) without making it stop on the way.
 
+An ambush decision (the ``ambush`` space) is five numbers: the speed, a point beside the route
+as in ``route`` (how far along, how far beside), a lead (+-1: ``LEAD_MAX`` before or after the
+robot comes abreast of the point) and where on the robot's side to run at (-1 its front
+corner, 0 the middle, 1 its rear corner). The human walks to the point and waits there until
+the robot's centre, along the route, is within the lead of it, then runs at the robot's side
+that faces it: the human who waits at the side of an aisle and steps into a robot as it
+passes, beside its protective field rather than through it.
+
 The actions played are what the episode records, so it replays exactly without this module.
 """
 
@@ -41,6 +49,10 @@ STANDOFF_MAX = 3.0
 
 ROUTE_OFFSET_MAX = 3.0
 """The farthest a route decision aims beside the robot's route, in m."""
+
+LEAD_MAX = 3.0
+"""The farthest before (or after) the robot comes abreast of its waiting point that an ambush
+decision runs at it, in m along the route."""
 
 TURN_CHOICES = np.linspace(-1.0, 1.0, 17)
 """Normalised turn rates an aimed decision chooses from."""
@@ -95,6 +107,32 @@ def route_action(
     wanted_speed, along, offset = np.clip(np.asarray(decision, dtype=np.float64), -1.0, 1.0)
     target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
     return walk_towards(simulation, target, wanted_speed, detour)
+
+
+def ambush_action(
+    simulation: Simulation, decision: NDArray[np.floating[Any]], detour: bool = False
+) -> NDArray[np.float32]:
+    """The normalised (speed, turn rate) action of an ambush ``decision`` (speed, share of the
+    route, offset beside it, lead, place on the robot's side, in [-1, 1]): towards the waiting
+    point beside the route until the robot's centre (the route point nearest it) comes within
+    the lead of it, then at the robot's side that faces the human, aimed as
+    :func:`aimed_action` aims (a quarter turn from the robot's heading, an eighth turn more
+    towards its rear or its front)."""
+    wanted_speed, along, offset, lead, at = np.clip(
+        np.asarray(decision, dtype=np.float64), -1.0, 1.0
+    )
+    route, robot = simulation.route, simulation.robot
+    waiting_at = 0.5 * (along + 1.0) * route.length
+    robot_at = route.project(np.array([robot.x, robot.y]))
+    if robot_at < waiting_at - lead * LEAD_MAX:
+        target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
+        return walk_towards(simulation, target, wanted_speed, detour)
+    x, y, _ = simulation.human_pose
+    left = math.cos(robot.heading) * (y - robot.y) - math.sin(robot.heading) * (x - robot.x)
+    side = 0.5 + 0.25 * at
+    return aimed_action(
+        simulation, np.array([wanted_speed, side if left >= 0.0 else -side, -1.0]), detour
+    )
 
 
 def walk_towards(

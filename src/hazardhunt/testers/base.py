@@ -154,7 +154,7 @@ class EpisodeRecorder(gym.Wrapper[Any, Any, Any, Any]):
             sequences: Each up to :attr:`horizon` decisions in ``space``.
             workers: Worker processes that play the batch at once (kept for the recorder's life).
             clear_path: The decision space's ``detour``.
-            space: The decision space's kind: ``open``, ``aim`` or ``route``.
+            space: The decision space's kind: ``open``, ``aim``, ``route`` or ``ambush``.
         """
         if space not in DECISION_KINDS:
             raise ValueError(f"unknown search space {space!r}: one of {', '.join(DECISION_KINDS)}")

@@ -95,8 +95,8 @@ class SearchParams(BaseModel):
                 data[new] = data.pop(old)
         flags = {new: data.pop(old) for old, new in SPACE_FLAGS.items() if old in data}
         space = data.get("space", "open")
-        if flags and "space" in cls.model_fields and isinstance(space, str | Mapping):
-            space = {"kind": space} if isinstance(space, str) else dict(space)
+        if flags and "space" in cls.model_fields and isinstance(space, str | list | Mapping):
+            space = dict(space) if isinstance(space, Mapping) else {"kind": space}
             data["space"] = {**space, **flags}
         else:
             # Refused as unknown, by the names the user gave.

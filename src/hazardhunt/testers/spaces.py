@@ -8,7 +8,10 @@ the human's action:
 - ``aim``: (speed, bearing around the robot, stand-off from its outline), aimed at the robot
   where it is when the decision is played (:func:`~hazardhunt.testers.aim.aimed_action`);
 - ``route``: (speed, share of the robot's route, offset beside it), a walk to a point of the
-  robot's route and a wait there (:func:`~hazardhunt.testers.aim.route_action`).
+  robot's route and a wait there (:func:`~hazardhunt.testers.aim.route_action`);
+- ``ambush``: (speed, share of the route, offset beside it, lead, place on the robot's side),
+  a wait beside the route and a run at the robot's side as it passes
+  (:func:`~hazardhunt.testers.aim.ambush_action`).
 
 ``detour`` makes any of them keep the human clear of walls and shelves
 (:func:`~hazardhunt.testers.clear_path.clear_action`), and makes the closed-loop ones walk round
@@ -33,38 +36,45 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, model_validator
+from pydantic import BaseModel, ConfigDict, field_validator, model_validator
 
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.episode import EpisodeSummary
-from hazardhunt.testers.aim import aimed_action, route_action
+from hazardhunt.testers.aim import aimed_action, ambush_action, route_action
 from hazardhunt.testers.clear_path import clear_action, play_decisions
 
-DecisionKind = Literal["open", "aim", "route"]
+DecisionKind = Literal["open", "aim", "route", "ambush"]
 """How one decision's numbers are read."""
 
-DECISION_KINDS: tuple[DecisionKind, ...] = ("open", "aim", "route")
-"""The decision spaces' kinds, in the order ``mixed`` takes them."""
+MIXED_KINDS: tuple[DecisionKind, ...] = ("open", "aim", "route")
+"""The decision spaces' kinds ``mixed`` takes, in its order."""
+
+DECISION_KINDS: tuple[DecisionKind, ...] = (*MIXED_KINDS, "ambush")
+"""The decision spaces' kinds."""
 
 SPACE_KINDS = (*DECISION_KINDS, "mixed")
 """The values of a searcher's space kind: one decision space, or all of them in turn."""
 
-_SIZES: dict[str, int] = {"open": 2, "aim": 3, "route": 3}
+_SIZES: dict[str, int] = {"open": 2, "aim": 3, "route": 3, "ambush": 5}
 
 _STEERING: dict[str, Callable[[Simulation, NDArray[np.floating[Any]], bool], NDArray[Any]]] = {
     "aim": aimed_action,
     "route": route_action,
+    "ambush": ambush_action,
 }
 
-_MIRRORED_NUMBER = {"open": 1, "aim": 1, "route": 2}
+_MIRRORED_NUMBER = {"open": 1, "aim": 1, "route": 2, "ambush": 2}
 """Per kind, the number of a decision whose sign mirrors it left for right: the turn rate, the
-bearing around the robot, the offset beside its route."""
+bearing around the robot, the offset beside its route (where the ambush waits)."""
 
 _BOUNDARY_VALUES: dict[str, tuple[tuple[float, ...], ...]] = {
     "open": ((-1.0, 0.0, 1.0),),
     # The bearing wraps round (-1 and 1 are both behind the robot): its quarter turns instead.
     "aim": ((-0.5, 0.0, 0.5, 1.0), (-1.0, 0.0, 1.0)),
     "route": ((-1.0, 0.0, 1.0), (-1.0, 0.0, 1.0)),
+    # On the route itself (offset 0) an ambush is the route's wait in the robot's way; the
+    # plain ambushes run at the middle of the robot's side.
+    "ambush": ((-1.0, 0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0, 1.0), (0.0,)),
 }
 """Per kind, the boundary values of each number of a decision after the speed."""
 
@@ -74,7 +84,7 @@ class DecisionSpace:
     """One way of reading a decision's numbers as the human's action."""
 
     kind: DecisionKind = "open"
-    """``open``, ``aim`` or ``route`` (module docstring)."""
+    """``open``, ``aim``, ``route`` or ``ambush`` (module docstring)."""
     detour: bool = False
     """Whether the human keeps clear of walls and shelves, and walks round them to a target."""
 
@@ -122,7 +132,9 @@ class DecisionSpace:
         In the closed-loop spaces these are the plain attacks a tester tries first: walk into
         the robot from ahead, behind or either side, or keep 1.5 or 3 m from it there (12 in
         ``aim``); wait on its route, or 3 m to either side of it, at the start, the middle or
-        the goal of its mission, where a controller switches modes (9 in ``route``).
+        the goal of its mission, where a controller switches modes (9 in ``route``); wait 3 m
+        to either side of the route there and run at the robot's side 3 m before it comes
+        abreast, as it does or 3 m after (18 in ``ambush``).
         """
         values = itertools.product(*_BOUNDARY_VALUES[self.kind])
         plans = np.array([(1.0, *numbers) for numbers in values])
@@ -134,25 +146,48 @@ class SearchSpace(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
-    kind: Literal["open", "aim", "route", "mixed"] = "open"
-    """One decision space's kind, or ``mixed``: every kind in turn (``open``, ``aim``,
-    ``route``), the failures found in one counting as known in the others."""
+    kind: Literal["open", "aim", "route", "ambush", "mixed"] | tuple[DecisionKind, ...] = "open"
+    """One decision space's kind, or several taking turns, the failures found in one counting
+    as known in the others: ``mixed`` is ``open``, ``aim`` and ``route``, a list names its own
+    (``["aim", "ambush"]``)."""
     detour: bool = False
     """Whether the human keeps clear of walls and shelves, and walks round them to a target."""
     plain_attacks: bool = False
     """Whether the search starts with each decision space's plain attacks
-    (:meth:`DecisionSpace.plain_attacks`: 3, 12 and 9 episodes)."""
+    (:meth:`DecisionSpace.plain_attacks`: 3, 12, 9 and 18 episodes)."""
 
     @model_validator(mode="before")
     @classmethod
     def _from_kind(cls, data: Any) -> Any:
-        """A bare kind (``space = "aim"``) is that kind with the other settings' defaults."""
-        return {"kind": data} if isinstance(data, str) else data
+        """A bare kind or list of kinds (``space = "aim"``, ``space = ["aim", "ambush"]``) is
+        that with the other settings' defaults."""
+        return {"kind": data} if isinstance(data, str | list | tuple) else data
+
+    @field_validator("kind", mode="before")
+    @classmethod
+    def _known_kinds(cls, kind: Any) -> Any:
+        """One kind of :data:`SPACE_KINDS`, or a list of distinct :data:`DECISION_KINDS`."""
+        if isinstance(kind, list | tuple):
+            unknown = [each for each in kind if each not in DECISION_KINDS]
+            if unknown or not kind or len(set(kind)) != len(kind):
+                raise ValueError(
+                    f"a list of kinds names each of {', '.join(DECISION_KINDS)} at most once "
+                    f"and one at least, not {list(kind)!r}"
+                )
+            return tuple(kind)
+        if kind not in SPACE_KINDS:
+            raise ValueError(
+                f"must be one of {', '.join(SPACE_KINDS)} or a list of kinds, not {kind!r}"
+            )
+        return kind
 
     @property
     def decision_spaces(self) -> tuple[DecisionSpace, ...]:
         """The decision spaces searched, in the order they take turns."""
-        kinds = DECISION_KINDS if self.kind == "mixed" else (self.kind,)
+        if isinstance(self.kind, tuple):
+            kinds = self.kind
+        else:
+            kinds = MIXED_KINDS if self.kind == "mixed" else (self.kind,)
         return tuple(DecisionSpace(kind, self.detour) for kind in kinds)
 
     @property
