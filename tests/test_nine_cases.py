@@ -44,3 +44,51 @@ def test_each_method_is_held_against_every_other_but_the_default(tmp_path):
     # a: qd's three classes beat everyone; b: cem's two ("other" does not count) lead, and
     # the union there is x and z, which only cem has.
     assert board == {"portfolio": (0, 0), "cem": (1, 1), "random": (0, 0)}
+
+
+def test_a_portfolio_variant_is_counted_in_the_default_s_place(tmp_path):
+    peers = tmp_path / "peers.json"
+    peers.write_text(
+        json.dumps(
+            {
+                "runs": [
+                    run("portfolio", "a", ["x"]),
+                    run("portfolio", "b", ["x", "y"]),
+                    run("cem", "a", ["x", "y"]),
+                    run("cem", "b", ["x"]),
+                ]
+            }
+        )
+    )
+    variant = {"variant": "wider", "failures": 2}
+    variants = tmp_path / "variants.json"
+    variants.write_text(
+        json.dumps(
+            {
+                "runs": [
+                    variant | {"case": "a", "seed": 0, "classes": ["x", "y", "z"]},
+                    variant | {"case": "b", "seed": 0, "classes": ["x"]},
+                ]
+            }
+        )
+    )
+    script = SCRIPT.parents[1] / "portfolio_variants.py"
+    result = subprocess.run(
+        [sys.executable, str(script), str(variants), str(peers), "--seeds", "0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    table = {
+        cells[1].strip(): [cell.strip() for cell in cells[2:4]]
+        for cells in (line.split("|") for line in result.stdout.splitlines()[2:])
+    }
+    # The default: 3 classes, as many as cem (and all of the case's classes) in b only; the
+    # variant in its place: 4, one run more (a) and one fewer (b), and in both cases as many
+    # classes as cem and every class found there.
+    assert table["classes"] == ["3", "4"]
+    assert table["runs with more / fewer classes than the default"] == ["", "1 / 1"]
+    assert table["failures"] == ["2", "4"]
+    assert table["cases with as many classes as every method, per seed"] == ["1", "2"]
+    assert table["cases with every method's classes together, per seed"] == ["1", "2"]
