@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.testers.clear_path import human_path
+from hazardhunt.world.geometry import point_in_body_frame
 
 STANDOFF_MAX = 3.0
 """The farthest a decision aims from the robot's outline, in m."""
@@ -122,13 +123,12 @@ def ambush_action(
         np.asarray(decision, dtype=np.float64), -1.0, 1.0
     )
     route, robot = simulation.route, simulation.robot
-    waiting_at = 0.5 * (along + 1.0) * route.length
-    robot_at = route.project(np.array([robot.x, robot.y]))
-    if robot_at < waiting_at - lead * LEAD_MAX:
-        target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
+    share = 0.5 * (along + 1.0)
+    if route.project(np.array([robot.x, robot.y])) < share * route.length - lead * LEAD_MAX:
+        target = route_point(simulation, share, offset * ROUTE_OFFSET_MAX)
         return walk_towards(simulation, target, wanted_speed, detour)
     x, y, _ = simulation.human_pose
-    left = math.cos(robot.heading) * (y - robot.y) - math.sin(robot.heading) * (x - robot.x)
+    _, left = point_in_body_frame(x, y, robot.x, robot.y, robot.heading)
     side = 0.5 + 0.25 * at
     return aimed_action(
         simulation, np.array([wanted_speed, side if left >= 0.0 else -side, -1.0]), detour
