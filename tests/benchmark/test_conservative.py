@@ -23,13 +23,16 @@ from hazardhunt.benchmark.conservative import (
 from hazardhunt.benchmark.held_out import (
     HELD_OUT_MUTANTS,
     AbsorbedIntoStaticMap,
+    BoostsInClearAisle,
     CreepsAfterWaiting,
+    DebouncedStop,
     FastTracksTakenForGhosts,
     ForgetsPassedHuman,
     HurriesAfterDelay,
     PriorityAtCrossings,
     SlowsForPeopleBeside,
     TakenForTheRacks,
+    TakesSlowingForYielding,
     TrackHeldWhileRelocalising,
 )
 from hazardhunt.sim.simulation import Simulation
@@ -103,9 +106,9 @@ def run_into_rear_right() -> Policy:
 
 
 def dash_at_rear_half() -> Policy:
-    """StaleTrack, StopDistanceConvertedTwice, SlowsForPeopleBeside, FastTracksTakenForGhosts:
-    wait 2 m beside the route, let the robot pass and sprint at the rear half of its right side
-    (out of the protective field's reach)."""
+    """StaleTrack, StopDistanceConvertedTwice, SlowsForPeopleBeside, FastTracksTakenForGhosts,
+    DebouncedStop: wait 2 m beside the route, let the robot pass and sprint at the rear half of
+    its right side (out of the protective field's reach)."""
     attack: Policy = lambda sim: intercept(sim, 1.5, offset=-0.35)  # noqa: E731
     return lie_in_wait((10.0, 7.6), NORTH, robot_past(9.6), attack)
 
@@ -226,6 +229,27 @@ def run_out_of_the_side_aisle_as_a_hold_begins() -> Policy:
     return lie_in_wait((10.9, 6.5), NORTH, lambda sim: sim.sim_time >= 14.2 - 1e-9, attack)
 
 
+def run_in_uneven_strides() -> Policy:
+    """TakesSlowingForYielding: wait 2.4 m beside the route, let the robot pass and run at the
+    rear half of its right side, every other step at 1.05 m/s instead of 1.5 m/s."""
+    steps = 0
+
+    def attack(sim: Simulation) -> tuple[float, float]:
+        nonlocal steps
+        steps += 1
+        return intercept(sim, 1.5 if steps % 2 else 1.05, offset=-0.2)
+
+    return lie_in_wait((10.0, 7.6), NORTH, robot_past(9.6), attack)
+
+
+def run_straight_across_its_path() -> Policy:
+    """BoostsInClearAisle: wait 3 m beside the route, out of the robot's lane, and run straight
+    north, across its path, when its centre passes 1.5 m short of the human: into its right
+    side, out of the protective field's reach."""
+    attack: Policy = lambda sim: keep_heading(sim, NORTH, 1.5)  # noqa: E731
+    return lie_in_wait((10.0, 7.0), NORTH, robot_past(8.5), attack)
+
+
 MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Policy]]] = {
     BlindRightRear: ("crossing", run_into_rear_right),
     StaleTrack: ("crossing", dash_at_rear_half),
@@ -243,6 +267,9 @@ MUTANT_KILLERS: dict[type[ConservativeController], tuple[str, Callable[[], Polic
     TrackHeldWhileRelocalising: ("crossing", run_out_of_the_side_aisle_as_a_hold_begins),
     SlowsForPeopleBeside: ("crossing", dash_at_rear_half),
     FastTracksTakenForGhosts: ("crossing", dash_at_rear_half),
+    TakesSlowingForYielding: ("crossing", run_in_uneven_strides),
+    BoostsInClearAisle: ("crossing", run_straight_across_its_path),
+    DebouncedStop: ("crossing", dash_at_rear_half),
 }
 """Per mutant: a built-in scenario and the scripted human that exposes its bug there."""
 

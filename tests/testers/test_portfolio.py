@@ -121,6 +121,30 @@ def test_the_mirror_arm_plays_the_other_side_of_failures_the_others_found(tmp_pa
     assert 0 < arms["mirror"]["episodes"] <= 2 * arms["mirror"]["cells_seen"]
 
 
+@pytest.mark.parametrize("min_share", [0.0, 0.5])
+def test_an_arm_with_a_min_share_plays_that_share_once_it_has_episodes(tmp_path, min_share):
+    params = {
+        "floor": 0.0,
+        "arms": [
+            {"name": "aimed", "method": "cem", "params": {"space": "aim", "batch_size": 6}},
+            {"name": "boundary", "method": "boundary", "min_share": min_share},
+        ],
+    }
+    portfolio_run(tmp_path / "run", 90, params, scenario="head-on")
+    arms = json.loads((tmp_path / "run" / "tester" / "portfolio.json").read_text())["arms_played"]
+    assert arms["aimed"]["failures"] > 0
+    if min_share:
+        assert arms["boundary"]["episodes"] >= min_share * 90 - 6  # but the last batch
+    else:  # the aimed arm keeps finding failures, so the budget stays with it
+        assert arms["boundary"]["episodes"] < 0.5 * 90 - 6
+
+
+def test_min_shares_that_add_up_to_more_than_the_run_are_refused():
+    arms = [{"name": name, "method": "uniform", "min_share": 0.6} for name in ("a", "b")]
+    with pytest.raises(ValueError, match="min_share add up to more than 1"):
+        PortfolioParams(arms=arms)
+
+
 def test_an_arm_that_raises_while_hearing_the_others_is_dropped(tmp_path, monkeypatch):
     def broken(self, plans, results):
         raise ZeroDivisionError("the arm's own bug")

@@ -377,6 +377,103 @@ class FastTracksTakenForGhosts(ConservativeController):
         return super().human_threatens(time, robot, human)
 
 
+class TakesSlowingForYielding(ConservativeController):
+    """Mutant: a human who slowed down by more than ``slowing`` between the last two looks is
+    taken to be giving way, and the robot drives on for that look.
+
+    The bug: to pass people who stop for it (as people at a crossing do), the robot reads a
+    human who slows down as one who yields, and does not stop for them. A person slowing down
+    is not standing still: someone who runs in uneven strides, or who checks their stride before
+    running on, is ignored at every look that follows a slower stride. Exposed by a human who
+    runs at the robot's side, every other stride slower.
+    """
+
+    def __init__(self, slowing: float = 0.3, **options: float) -> None:
+        """Args:
+        slowing: The drop in speed between the last two looks, in m/s, above which the
+            human is taken to give way.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.slowing = slowing
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is not None and len(human.recent_times) == 3:
+            steps = np.diff(human.recent_positions, axis=0)  # consecutive tracking instants
+            speeds = np.linalg.norm(steps, axis=1) / np.diff(human.recent_times)
+            if speeds[0] - speeds[1] > self.slowing:
+                return False
+        return super().human_threatens(time, robot, human)
+
+
+class BoostsInClearAisle(ConservativeController):
+    """Mutant: while nobody is in its lane ahead, the robot drives at ``boost_speed``; its stop
+    distance stays the one for its cruise speed.
+
+    The bug: to make up time on long free stretches, the robot speeds up whenever its lane is
+    clear for ``lookout`` m ahead, but the stop distance was derived once, for the cruise speed
+    (0.6 m/s, 1.76 m): at 1.2 m/s it would need 3.45 m. A human in the lane ahead slows it back
+    down; one beside the lane does not. Exposed by a human who waits beside the route and runs
+    into the robot's side as it passes.
+    """
+
+    def __init__(self, boost_speed: float = 1.2, lookout: float = 4.0, **options: float) -> None:
+        """Args:
+        boost_speed: The speed on a clear stretch, in m/s.
+        lookout: How far ahead of its front face the lane (0.5 m beyond either side of the
+            robot) must be clear, in m.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.boost_speed = boost_speed
+        self.lookout = lookout
+
+    def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
+        command = super().control(time, robot, human)
+        if command.speed <= 0.0 or human is None:
+            return command
+        forward, left = to_body_frame(human.position, robot.x, robot.y, robot.heading)
+        front = 0.5 * self.robot.length
+        in_lane = abs(left) <= 0.5 * self.robot.width + 0.5 + self.human_radius
+        if in_lane and front <= forward <= front + self.lookout + self.human_radius:
+            return command
+        return self.follow_route(robot, self.boost_speed)
+
+
+class DebouncedStop(ConservativeController):
+    """Mutant: the robot stops for a human only once they have been within the stop distance
+    at ``confirm`` looks in a row (a debounce).
+
+    The bug: to keep a flickering detection at the edge of the stop distance from making the
+    robot stop and go, the stop is confirmed over several looks; a human who steps out again
+    starts the count anew. Each look of confirmation is 0.2 s in which the robot drives on
+    and a running person covers 0.3 m, which the stop distance does not allow for. Exposed by
+    a human who runs straight into the robot's side.
+    """
+
+    def __init__(self, confirm: int = 4, **options: float) -> None:
+        """Args:
+        confirm: Looks in a row the human must be within the stop distance for the robot to
+            stop.
+        **options: Those of :class:`ConservativeController`.
+        """
+        super().__init__(**options)
+        self.confirm = confirm
+        self._within = 0
+
+    def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
+        super().reset(floor, route, robot, params)
+        self._within = 0
+
+    def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
+        if human is None:
+            self._within = 0
+            return True
+        within = self.clearance(robot, self.human_position(time, human)) <= self.stop_distance
+        self._within = self._within + 1 if within else 0
+        return self._within >= self.confirm
+
+
 HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     CreepsAfterWaiting,
     AbsorbedIntoStaticMap,
@@ -387,8 +484,12 @@ HELD_OUT_MUTANTS: tuple[type[ConservativeController], ...] = (
     TrackHeldWhileRelocalising,
     SlowsForPeopleBeside,
     FastTracksTakenForGhosts,
+    TakesSlowingForYielding,
+    BoostsInClearAisle,
+    DebouncedStop,
 )
 """The held-out mutants, one planted bug each. The first three were written once the
 portfolio's arms were settled; the next two after its ``closer_gain`` was; the sixth after
-every setting of the portfolio had been published, and the last three after that. No default
-has been tuned on any of them."""
+every setting of the portfolio had been published, the next three after that, and the last
+three (the fifth set) before any variant of the portfolio with the ``ambush`` space was run
+on them. No default has been tuned on any of them."""

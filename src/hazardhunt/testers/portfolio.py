@@ -33,6 +33,8 @@ How the budget moves:
 - each arm's value is its gain per episode, discounted so that what it found lately counts
   most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
   next batch goes to the arm of highest value;
+- an arm with a ``min_share`` plays at least that share of the run's episodes whenever it has
+  one to propose;
 - every arm keeps at least ``floor`` / (number of arms) of the episodes played, so that a
   search that finds its first failure late (behind a protective field) gets to find it; the
   mirror and the boundary propose nothing before the first failure, and the mirror, which
@@ -116,6 +118,10 @@ class Arm(BaseModel):
     params: dict[str, Any] = {}
     """The sampler's settings (those of ``hazardhunt run --tester METHOD``, but ``workers``,
     which the portfolio sets)."""
+    min_share: float = Field(default=0.0, ge=0.0, le=1.0, allow_inf_nan=False)
+    """The least share of the run's episodes the arm plays whenever it has an episode to
+    propose, whatever it finds (for an arm that needs many episodes to reach a thin band of
+    failures, like the boundary's bisection lines). 0: only the portfolio's ``floor``."""
 
     @field_validator("method")
     @classmethod
@@ -175,6 +181,8 @@ class PortfolioParams(SearchParams):
         names = [arm.name for arm in arms]
         if len(set(names)) != len(names):
             raise ValueError(f"arm names must differ: {', '.join(names)}")
+        if sum(arm.min_share for arm in arms) > 1.0:
+            raise ValueError("the arms' min_share add up to more than 1")
         for arm in arms:
             if "workers" in arm.params:
                 raise ValueError(f"arm {arm.name!r}: workers is the portfolio's setting")
@@ -260,6 +268,9 @@ class PortfolioSampler:
             raise RuntimeError("tester 'portfolio': no arm has an episode to propose")
         for state in active:  # in the arms' order
             if state.batches < state.first_look:
+                return state
+        for state in active:
+            if state.episodes < state.arm.min_share * len(self.episode_arms):
                 return state
         played = sum(state.episodes for state in active)
         least = min(active, key=lambda state: state.episodes)
