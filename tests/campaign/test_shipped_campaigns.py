@@ -5,6 +5,7 @@ from pathlib import Path
 import pytest
 
 from hazardhunt.campaign.config import load_campaign
+from hazardhunt.testers.portfolio import FIRST_DEFAULT_ARMS, PortfolioParams
 
 CAMPAIGNS = Path(__file__).parents[2] / "campaigns"
 
@@ -35,3 +36,10 @@ def test_every_shipped_campaign_file_is_tested():
         "study-search.toml",
         "study.toml",
     ]
+
+
+def test_the_study_budget_portfolio_runs_keep_the_arms_they_were_published_with():
+    # benchmarks/results/study-portfolio/ was measured with the first default's six arms.
+    config = load_campaign(CAMPAIGNS / "study-portfolio.toml")
+    for run in config.runs():
+        assert PortfolioParams(**run.tester_params).arms == FIRST_DEFAULT_ARMS

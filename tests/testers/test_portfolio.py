@@ -66,11 +66,12 @@ def test_an_arm_that_raises_is_dropped_and_the_others_spend_the_budget(tmp_path,
     def broken(self, plans, results):
         raise ZeroDivisionError("the arm's own bug")
 
-    monkeypatch.setattr(CrossEntropySampler, "tell", broken)  # both cem arms fail
+    monkeypatch.setattr(CrossEntropySampler, "tell", broken)  # the three cem arms fail
     with pytest.warns(RuntimeWarning) as warned:
         summary = portfolio_run(tmp_path / "run", 80)
     assert sorted(str(warning.message).split(":")[0] for warning in warned) == [
         "portfolio arm 'cem-aim' raised and was dropped",
+        "portfolio arm 'cem-ambush' raised and was dropped",
         "portfolio arm 'cem-mixed' raised and was dropped",
     ]
     assert summary["episodes"] == 80
@@ -79,7 +80,8 @@ def test_an_arm_that_raises_is_dropped_and_the_others_spend_the_budget(tmp_path,
     assert arms["cem-aim"]["episodes"] == 20  # its one batch
     assert arms["random"]["dropped"] is None
     others = ("mirror", "qd-mixed", "random", "boundary")
-    assert sum(arms[name]["episodes"] for name in others) == 80 - 40
+    assert arms["cem-ambush"]["episodes"] == 20
+    assert sum(arms[name]["episodes"] for name in others) == 80 - 60
 
 
 def test_a_portfolio_whose_every_arm_raises_fails_the_run(tmp_path, monkeypatch):

@@ -12,13 +12,17 @@ score). Its default arms (:data:`DEFAULT_ARMS`):
 - ``cem-mixed``: the cross-entropy method over every decision space in turn, walking round
   obstacles, starting from the plain attacks;
 - ``cem-aim``: the cross-entropy method aimed at the robot, walking round obstacles;
+- ``cem-ambush``: the cross-entropy method over humans who wait beside the robot's route and
+  run at its side as it passes, walking round obstacles, starting from the plain ambushes;
 - ``qd-mixed``: quality-diversity search over every decision space, one emitter each;
 - ``random``: uniform random sampling of open-loop actions that keep off walls and shelves;
 - ``mirror``: for a failure any arm found, the same episode mirrored left for right, while the
   robot's other side has no failure of its kind: one episode per side checked;
 - ``boundary``: for a failure any arm found, bisection towards a nearby episode that did not
   fail (:mod:`hazardhunt.testers.boundary`): where a failure region ends its mechanism often
-  changes first (a human the field saw too late rather than never).
+  changes first (a human the field saw too late rather than never); once it has failures to
+  follow it plays at least a fifth of the run's episodes (``min_share``), as the bands it looks
+  for are thin.
 
 How the budget moves:
 
@@ -142,16 +146,29 @@ DEFAULT_ARMS = (
     ),
     Arm(name="cem-aim", method="cem", params={"space": {"kind": "aim", "detour": True}}),
     Arm(
+        name="cem-ambush",
+        method="cem",
+        params={"space": {"kind": "ambush", "detour": True, "plain_attacks": True}},
+    ),
+    Arm(
         name="qd-mixed",
         method="qd",
         params={"emitters": 3, "space": {"kind": "mixed", "detour": True}},
     ),
     Arm(name="random", method="uniform", params={"space": {"kind": "open", "detour": True}}),
     Arm(name="mirror", method="mirror"),
-    Arm(name="boundary", method="boundary"),
+    Arm(name="boundary", method="boundary", min_share=0.2),
 )
 """The arms of the default portfolio: the configurations that were each the best on some kind
-of system under test (docs/search-methods.md)."""
+of system under test (docs/search-methods.md). Until 0.2.0 they were six: no ``cem-ambush``,
+and no ``min_share`` for the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
+FIRST_DEFAULT_ARMS = (
+    *DEFAULT_ARMS[:2],
+    *DEFAULT_ARMS[3:-1],
+    Arm(name="boundary", method="boundary"),
+)
+"""The six arms of the first default, with which the results published before 0.2.0 were
+measured (``campaigns/study-portfolio.toml`` names them)."""
 
 
 class PortfolioParams(SearchParams):
