@@ -160,15 +160,15 @@ DEFAULT_ARMS = (
     Arm(name="boundary", method="boundary", min_share=0.2),
 )
 """The arms of the default portfolio: the configurations that were each the best on some kind
-of system under test (docs/search-methods.md). Until 0.2.0 they were six: no ``cem-ambush``,
+of system under test (docs/search-methods.md). The first default had six: no ``cem-ambush``,
 and no ``min_share`` for the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
 FIRST_DEFAULT_ARMS = (
     *DEFAULT_ARMS[:2],
     *DEFAULT_ARMS[3:-1],
     Arm(name="boundary", method="boundary"),
 )
-"""The six arms of the first default, with which the results published before 0.2.0 were
-measured (``campaigns/study-portfolio.toml`` names them)."""
+"""The six arms of the first default, with which the results published before the
+``cem-ambush`` arm were measured (``campaigns/study-portfolio.toml`` names them)."""
 
 
 class PortfolioParams(SearchParams):
