@@ -162,10 +162,8 @@ DEFAULT_ARMS = (
 """The arms of the default portfolio: the configurations that were each the best on some kind
 of system under test (docs/search-methods.md). The first default had six: no ``cem-ambush``,
 and no ``min_share`` for the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
-FIRST_DEFAULT_ARMS = (
-    *DEFAULT_ARMS[:2],
-    *DEFAULT_ARMS[3:-1],
-    Arm(name="boundary", method="boundary"),
+FIRST_DEFAULT_ARMS = tuple(
+    arm.model_copy(update={"min_share": 0.0}) for arm in DEFAULT_ARMS if arm.name != "cem-ambush"
 )
 """The six arms of the first default, with which the results published before the
 ``cem-ambush`` arm were measured (``campaigns/study-portfolio.toml`` names them)."""
