@@ -53,6 +53,9 @@ def test_the_default_portfolio_says_which_arm_found_each_class_first(tmp_path):
     assert len(first) >= 2
     played_by = pd.read_csv(tmp_path / "run" / "tester" / "arms.csv")
     assert list(played_by["episode"]) == list(range(140))
+    # The first look: the aimed arm's batch, then the plain attacks and searches of cem-mixed.
+    assert set(played_by["arm"][:20]) == {"cem-aim"}
+    assert set(played_by["arm"][20:80]) == {"cem-mixed"}
     failures = pd.read_parquet(tmp_path / "run" / "failures.parquet").set_index("episode")
     for failure_class, (arm, episode) in first.items():
         assert played_by["arm"][episode] == arm
