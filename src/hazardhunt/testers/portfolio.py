@@ -161,10 +161,10 @@ DEFAULT_ARMS = (
 )
 """The arms of the default portfolio, in the order of their first look: the configurations that
 were each the best on some kind of system under test (docs/search-methods.md). The aimed arm
-plays the run's first batch, as behind a protective field the first failures mostly need a
-human who comes for the robot; ``cem-mixed``'s plain attacks follow within the first 80
-episodes. The first default had six arms, ``cem-mixed`` first, no ``cem-ambush`` and no
-``min_share`` for the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
+plays the run's first batch, as behind a protective field a human who comes for the robot finds
+the first failure soonest; ``cem-mixed``'s plain attacks follow within the first 80 episodes.
+The first default had six arms, ``cem-mixed`` first, no ``cem-ambush`` and no ``min_share`` for
+the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
 FIRST_DEFAULT_ARMS = tuple(
     arm.model_copy(update={"min_share": 0.0})
     for name in ("cem-mixed", "cem-aim", "qd-mixed", "random", "mirror", "boundary")
