@@ -413,8 +413,8 @@ class BoostsInClearAisle(ConservativeController):
     The bug: to make up time on long free stretches, the robot speeds up whenever its lane is
     clear for ``lookout`` m ahead, but the stop distance was derived once, for the cruise speed
     (0.6 m/s, 1.76 m): at 1.2 m/s it would need 3.45 m. A human in the lane ahead slows it back
-    down; one beside the lane does not. Exposed by a human who waits beside the route and runs
-    into the robot's side as it passes.
+    down; one beside the lane does not. With no human tracked it keeps to its cruise speed.
+    Exposed by a human who waits beside the route and runs into the robot's side as it passes.
     """
 
     def __init__(self, boost_speed: float = 1.2, lookout: float = 4.0, **options: float) -> None:
@@ -466,11 +466,11 @@ class DebouncedStop(ConservativeController):
         self._within = 0
 
     def human_threatens(self, time: float, robot: RobotState, human: TrackedHuman | None) -> bool:
-        if human is None:
+        threatened = super().human_threatens(time, robot, human)
+        if human is None:  # not seen: stop at once, as the original does
             self._within = 0
-            return True
-        within = self.clearance(robot, self.human_position(time, human)) <= self.stop_distance
-        self._within = self._within + 1 if within else 0
+            return threatened
+        self._within = self._within + 1 if threatened else 0
         return self._within >= self.confirm
 
 

@@ -165,11 +165,10 @@ plays the run's first batch, as behind a protective field a human who comes for 
 the first failure soonest; ``cem-mixed``'s plain attacks follow within the first 80 episodes.
 The first default had six arms, ``cem-mixed`` first, no ``cem-ambush`` and no ``min_share`` for
 the boundary (:data:`FIRST_DEFAULT_ARMS`)."""
+_DEFAULT_BY_NAME = {arm.name: arm for arm in DEFAULT_ARMS}
 FIRST_DEFAULT_ARMS = tuple(
-    arm.model_copy(update={"min_share": 0.0})
+    _DEFAULT_BY_NAME[name].model_copy(update={"min_share": 0.0})
     for name in ("cem-mixed", "cem-aim", "qd-mixed", "random", "mirror", "boundary")
-    for arm in DEFAULT_ARMS
-    if arm.name == name
 )
 """The six arms of the first default, in its order, with which the results published before the
 ``cem-ambush`` arm were measured (``campaigns/study-portfolio.toml`` names them)."""
