@@ -7,7 +7,11 @@ methods' runs that ``benchmarks/peers/nine.py`` reads. Per variant and the defau
 failures over every (case, seed), the runs with more and fewer classes than the default's run,
 and per seed the cases in which it finds at least as many classes as every other method and
 all of their classes together (``nine.py``'s counts with the variant's runs as the
-portfolio's). Prints Markdown; needs only the standard library.
+portfolio's), and the median episode of the runs' first failures. With ``--against VARIANT``
+the runs with more and fewer classes are counted against that variant's runs instead of the
+default's; with ``--case CASE`` (and ``--seeds``, any of the variants' seeds) it prints instead
+each variant's failures, classes and first failure per seed in that case. Prints Markdown;
+needs only the standard library.
 
     python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \\
         benchmarks/results/peers.json benchmarks/results/peers_nine_*.json \\
@@ -15,12 +19,15 @@ portfolio's). Prints Markdown; needs only the standard library.
         benchmarks/results/peers_portfolio_seeds12.json \\
         benchmarks/results/aim_crossing_1.25m.json \\
         benchmarks/results/aim_clear_path_crossing_1.25m.json
+    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \
+        benchmarks/results/peers.json --case crossing:1.25m --seeds 0 1 2 3 4 5 6 7 8
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 from pathlib import Path
 from typing import Any
@@ -37,34 +44,67 @@ def main() -> None:
     parser.add_argument("variants", type=Path)
     parser.add_argument("files", nargs="+", type=Path, help="the files nine.py reads")
     parser.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS))
+    parser.add_argument("--against", help="count runs with more / fewer against this variant")
+    parser.add_argument("--case", help="print each variant's runs of this case, seed by seed")
     args = parser.parse_args()
 
     runs = json.loads(args.variants.read_text())["runs"]
     names = list(dict.fromkeys(run["variant"] for run in runs))
-    base = {seed: rows_of(args.files, seed) for seed in args.seeds}
-    print("| | " + " | ".join([DEFAULT, *names]) + " |")
-    print("|---" * (len(names) + 2) + "|")
-    columns = [summary(base, {}, args.seeds)]
-    for name in names:
-        own = {
+    by_variant = {
+        name: {
             (run["case"], run["seed"]): run
             for run in runs
             if run["variant"] == name and run["seed"] in args.seeds
         }
-        columns.append(summary(base, own, args.seeds))
+        for name in names
+    }
+    if args.case:
+        print_case(by_variant, args.case, args.seeds)
+        return
+    if args.against is not None and args.against not in by_variant:
+        raise SystemExit(f"--against: no variant {args.against!r} (there are {', '.join(names)})")
+    base = {seed: rows_of(args.files, seed) for seed in args.seeds}
+    print("| | " + " | ".join([DEFAULT, *names]) + " |")
+    print("|---" * (len(names) + 2) + "|")
+    against = (args.against, by_variant[args.against]) if args.against else ("the default", {})
+    columns = [summary(base, {}, args.seeds, against)]
+    for name in names:
+        columns.append(summary(base, by_variant[name], args.seeds, against))
     for label in columns[0]:
         print(f"| {label} | " + " | ".join(str(column[label]) for column in columns) + " |")
+
+
+def print_case(
+    by_variant: dict[str, dict[tuple[str, int], dict[str, Any]]], case: str, seeds: list[int]
+) -> None:
+    """Per variant, its runs of ``case``: failures, classes and first failure, seed by seed."""
+    print(f"| {case} | " + " | ".join(f"seed {seed}" for seed in seeds) + " |")
+    print("|---" * (len(seeds) + 1) + "|")
+    for name, own in by_variant.items():
+        cells = []
+        for seed in seeds:
+            run = own.get((case, seed))
+            cells.append(
+                "-"
+                if run is None
+                else f"{run['failures']} ({len(classes(run))}, "
+                f"{run.get('first_failure_episode', '-')})"
+            )
+        print(f"| {name}: failures (classes, first failure) | " + " | ".join(cells) + " |")
 
 
 def summary(
     base: dict[int, dict[tuple[str, str], dict[str, Any]]],
     own: dict[tuple[str, int], dict[str, Any]],
     seeds: list[int],
+    against: tuple[str, dict[tuple[str, int], dict[str, Any]]],
 ) -> dict[str, str]:
     """The default's numbers, or a variant's (``own``: its runs by case and seed) with its runs
-    in place of the default's."""
+    in place of the default's; runs with more and fewer classes counted against ``against``'s
+    runs (``against``: its name and runs) where it has them, else the default's."""
+    against_name, against_runs = against
     total, failures, more, fewer = 0, 0, 0, 0
-    as_many, union = [], []
+    as_many, union, firsts = [], [], []
     for seed in seeds:
         rows = dict(base[seed])
         cases = sorted({case for case, method in rows if method == DEFAULT})
@@ -73,8 +113,11 @@ def summary(
                 raise SystemExit(f"the variant has no run of {case}, seed {seed}")
             default_row = rows[(case, DEFAULT)]
             row = own.get((case, seed), default_row)
-            found, before = len(classes(row)), len(classes(default_row))
+            found = len(classes(row))
+            before = len(classes(against_runs.get((case, seed), default_row)))
             total, failures = total + found, failures + row["failures"]
+            if row.get("first_failure_episode") is not None:
+                firsts.append(row["first_failure_episode"])
             more, fewer = more + (found > before), fewer + (found < before)
             rows[(case, DEFAULT)] = row
         verdicts = [leads(rows, case, DEFAULT, set()) for case in cases]
@@ -82,10 +125,13 @@ def summary(
         union.append(str(sum(v[1] for v in verdicts)))
     return {
         "classes": str(total),
-        "runs with more / fewer classes than the default": f"{more} / {fewer}" if own else "",
+        f"runs with more / fewer classes than {against_name}": f"{more} / {fewer}"
+        if own or against_runs
+        else "",
         "failures": f"{failures:,}",
         "cases with as many classes as every method, per seed": " / ".join(as_many),
         "cases with every method's classes together, per seed": " / ".join(union),
+        "median first failure": f"{statistics.median(firsts):g}" if firsts else "-",
     }
 
 

@@ -92,3 +92,34 @@ def test_a_portfolio_variant_is_counted_in_the_default_s_place(tmp_path):
     assert table["failures"] == ["2", "4"]
     assert table["cases with as many classes as every method, per seed"] == ["1", "2"]
     assert table["cases with every method's classes together, per seed"] == ["1", "2"]
+
+
+def test_portfolio_variants_compare_with_another_variant_and_list_one_case(tmp_path):
+    peers = tmp_path / "peers.json"
+    peers.write_text(json.dumps({"runs": [run("portfolio", "a", ["x"])]}))
+    runs = [
+        {"variant": "old", "case": "a", "seed": 0, "classes": ["x", "y"], "failures": 5},
+        {"variant": "new", "case": "a", "seed": 0, "classes": ["x"], "failures": 7},
+        {"variant": "new", "case": "a", "seed": 1, "classes": ["x"], "failures": 3},
+    ]
+    runs[0]["first_failure_episode"], runs[1]["first_failure_episode"] = 40, 9
+    variants = tmp_path / "variants.json"
+    variants.write_text(json.dumps({"runs": runs}))
+    script = SCRIPT.parents[1] / "portfolio_variants.py"
+
+    def table(*options):
+        argv = [sys.executable, str(script), str(variants), str(peers), *options]
+        done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=True)
+        return {
+            cells[1].strip(): [cell.strip() for cell in cells[2:-1]]
+            for cells in (line.split("|") for line in done.stdout.splitlines()[2:])
+        }
+
+    # Against "old" (two classes), the default and "new" (one each) have one run with fewer.
+    compared = table("--seeds", "0", "--against", "old")
+    assert compared["runs with more / fewer classes than old"] == ["0 / 1", "0 / 0", "0 / 1"]
+    assert compared["median first failure"] == ["-", "40", "9"]
+    # One case, seed by seed: failures (classes, first failure), "-" where a seed was not run.
+    listed = table("--case", "a", "--seeds", "0", "1")
+    assert listed["old: failures (classes, first failure)"] == ["5 (2, 40)", "-"]
+    assert listed["new: failures (classes, first failure)"] == ["7 (1, 9)", "3 (1, -)"]
