@@ -10,8 +10,10 @@ all of their classes together (``nine.py``'s counts with the variant's runs as t
 portfolio's), and the median episode of the runs' first failures. With ``--against VARIANT``
 the runs with more and fewer classes are counted against that variant's runs instead of the
 default's; with ``--case CASE`` (and ``--seeds``, any of the variants' seeds) it prints instead
-each variant's failures, classes and first failure per seed in that case. Prints Markdown;
-needs only the standard library.
+each variant's failures, classes and first failure per seed in that case; with ``--arms
+VARIANT``, per arm of that variant over its runs: the episodes it played, its failures, the
+classes it found first (``other`` left out) and how many of them at episode ``--late`` or
+later, and classes per 1,000 of its episodes. Prints Markdown; needs only the standard library.
 
     python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \\
         benchmarks/results/peers.json benchmarks/results/peers_nine_*.json \\
@@ -21,6 +23,8 @@ needs only the standard library.
         benchmarks/results/aim_clear_path_crossing_1.25m.json
     python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \
         benchmarks/results/peers.json --case crossing:1.25m --seeds 0 1 2 3 4 5 6 7 8
+    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \
+        benchmarks/results/peers.json --arms aim-first
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "peers"))
-from nine import classes, leads, rows_of
+from nine import OTHER, classes, leads, rows_of
 
 DEFAULT = "portfolio"
 SEEDS = (0, 1, 2)
@@ -46,6 +50,10 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS))
     parser.add_argument("--against", help="count runs with more / fewer against this variant")
     parser.add_argument("--case", help="print each variant's runs of this case, seed by seed")
+    parser.add_argument("--arms", help="print what each arm of this variant played and found")
+    parser.add_argument(
+        "--late", type=int, default=300, help="with --arms: classes found from this episode on"
+    )
     args = parser.parse_args()
 
     runs = json.loads(args.variants.read_text())["runs"]
@@ -60,6 +68,11 @@ def main() -> None:
     }
     if args.case:
         print_case(by_variant, args.case, args.seeds)
+        return
+    if args.arms is not None:
+        if args.arms not in by_variant:
+            raise SystemExit(f"--arms: no variant {args.arms!r} (there are {', '.join(names)})")
+        print_arms(args.arms, list(by_variant[args.arms].values()), args.late)
         return
     if args.against is not None and args.against not in by_variant:
         raise SystemExit(f"--against: no variant {args.against!r} (there are {', '.join(names)})")
@@ -91,6 +104,30 @@ def print_case(
                 f"{run.get('first_failure_episode', '-')})"
             )
         print(f"| {name}: failures (classes, first failure) | " + " | ".join(cells) + " |")
+
+
+def print_arms(name: str, runs: list[dict[str, Any]], late: int) -> None:
+    """What each arm of ``runs`` played and found first, summed over the runs."""
+    totals: dict[str, dict[str, int]] = {}
+    for run in runs:
+        for arm, played in run["arms"].items():
+            total = totals.setdefault(arm, {"episodes": 0, "failures": 0, "classes": 0, "late": 0})
+            found = {c: e for c, e in played["classes_first_found"].items() if c != OTHER}
+            total["episodes"] += played["episodes"]
+            total["failures"] += played["failures"]
+            total["classes"] += len(found)
+            total["late"] += sum(episode >= late for episode in found.values())
+    print(
+        f"| {name}, {len(runs)} runs: arm | episodes | failures | classes found first | "
+        f"of them from episode {late} on | classes per 1,000 episodes |"
+    )
+    print("|---" * 6 + "|")
+    for arm, total in totals.items():
+        rate = 1000 * total["classes"] / total["episodes"] if total["episodes"] else 0.0
+        print(
+            f"| {arm} | {total['episodes']:,} | {total['failures']:,} | {total['classes']} | "
+            f"{total['late']} | {rate:.1f} |"
+        )
 
 
 def summary(

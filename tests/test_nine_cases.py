@@ -123,3 +123,37 @@ def test_portfolio_variants_compare_with_another_variant_and_list_one_case(tmp_p
     listed = table("--case", "a", "--seeds", "0", "1")
     assert listed["old: failures (classes, first failure)"] == ["5 (2, 40)", "-"]
     assert listed["new: failures (classes, first failure)"] == ["7 (1, 9)", "3 (1, -)"]
+
+
+def test_portfolio_variants_sum_what_each_arm_played_and_found_first(tmp_path):
+    peers = tmp_path / "peers.json"
+    peers.write_text(json.dumps({"runs": [run("portfolio", "a", ["x"])]}))
+
+    def arms(first_found: dict[str, int], episodes: int) -> dict[str, object]:
+        return {
+            "aimed": {"episodes": episodes, "failures": 3, "classes_first_found": first_found},
+            "random": {"episodes": 100, "failures": 0, "classes_first_found": {}},
+        }
+
+    runs = [
+        {"variant": "v", "case": "a", "seed": 0, "arms": arms({"x": 5, "other": 9}, 400)},
+        {"variant": "v", "case": "b", "seed": 0, "arms": arms({"y": 350, "z": 20}, 600)},
+        {"variant": "v", "case": "a", "seed": 5, "arms": arms({"w": 700}, 900)},
+    ]
+    variants = tmp_path / "variants.json"
+    variants.write_text(json.dumps({"runs": runs}))
+    script = SCRIPT.parents[1] / "portfolio_variants.py"
+    argv = [sys.executable, str(script), str(variants), str(peers), "--arms", "v"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=True)
+    rows = {
+        cells[1].strip(): [cell.strip() for cell in cells[2:-1]]
+        for cells in (line.split("|") for line in done.stdout.splitlines()[2:])
+    }
+    # Seeds 0-2 only (the seed-5 run is left out); "other" is no class; y came late (>= 300).
+    assert rows["aimed"] == ["1,000", "6", "3", "1", "3.0"]
+    assert rows["random"] == ["200", "0", "0", "0", "0.0"]
+    missing = subprocess.run(
+        [*argv[:-1], "w"], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert missing.returncode != 0
+    assert "no variant 'w'" in missing.stderr
