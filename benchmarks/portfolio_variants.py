@@ -21,9 +21,9 @@ later, and classes per 1,000 of its episodes. Prints Markdown; needs only the st
         benchmarks/results/peers_portfolio_seeds12.json \\
         benchmarks/results/aim_crossing_1.25m.json \\
         benchmarks/results/aim_clear_path_crossing_1.25m.json
-    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \
+    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \\
         benchmarks/results/peers.json --case crossing:1.25m --seeds 0 1 2 3 4 5 6 7 8
-    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \
+    python benchmarks/portfolio_variants.py benchmarks/results/portfolio_ambush_variants.json \\
         benchmarks/results/peers.json --arms aim-first
 """
 
