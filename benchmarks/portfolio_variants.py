@@ -10,7 +10,8 @@ all of their classes together (``nine.py``'s counts with the variant's runs as t
 portfolio's), and the median episode of the runs' first failures. With ``--against VARIANT``
 the runs with more and fewer classes are counted against that variant's runs instead of the
 default's; with ``--case CASE`` (and ``--seeds``, any of the variants' seeds) it prints instead
-each variant's failures, classes and first failure per seed in that case; with ``--arms
+each variant's failures, classes and first failure per seed in that case, and below them every
+method of the other files (the peers, the study's testers, the first default); with ``--arms
 VARIANT``, per arm of that variant over its runs: the episodes it played, its failures, the
 classes it found first (``other`` left out) and how many of them at episode ``--late`` or
 later, and classes per 1,000 of its episodes. Prints Markdown; needs only the standard library.
@@ -66,20 +67,22 @@ def main() -> None:
         }
         for name in names
     }
+    base = {seed: rows_of(args.files, seed) for seed in args.seeds}
     if args.case:
-        print_case(by_variant, args.case, args.seeds)
+        print_case(by_variant, base, args.case, args.seeds)
         return
     if args.arms is not None:
-        if args.arms not in by_variant:
-            raise SystemExit(f"--arms: no variant {args.arms!r} (there are {', '.join(names)})")
-        print_arms(args.arms, list(by_variant[args.arms].values()), args.late)
+        print_arms(
+            args.arms, list(variant_runs(by_variant, "--arms", args.arms).values()), args.late
+        )
         return
-    if args.against is not None and args.against not in by_variant:
-        raise SystemExit(f"--against: no variant {args.against!r} (there are {', '.join(names)})")
-    base = {seed: rows_of(args.files, seed) for seed in args.seeds}
     print("| | " + " | ".join([DEFAULT, *names]) + " |")
     print("|---" * (len(names) + 2) + "|")
-    against = (args.against, by_variant[args.against]) if args.against else ("the default", {})
+    against = (
+        (args.against, variant_runs(by_variant, "--against", args.against))
+        if args.against
+        else ("the default", {})
+    )
     columns = [summary(base, {}, args.seeds, against)]
     for name in names:
         columns.append(summary(base, by_variant[name], args.seeds, against))
@@ -87,13 +90,38 @@ def main() -> None:
         print(f"| {label} | " + " | ".join(str(column[label]) for column in columns) + " |")
 
 
+def variant_runs(
+    by_variant: dict[str, dict[tuple[str, int], dict[str, Any]]], option: str, name: str
+) -> dict[tuple[str, int], dict[str, Any]]:
+    """The runs of the variant ``name`` that ``option`` asked for, or exit naming the others."""
+    if name not in by_variant:
+        raise SystemExit(f"{option}: no variant {name!r} (there are {', '.join(by_variant)})")
+    return by_variant[name]
+
+
 def print_case(
-    by_variant: dict[str, dict[tuple[str, int], dict[str, Any]]], case: str, seeds: list[int]
+    by_variant: dict[str, dict[tuple[str, int], dict[str, Any]]],
+    base: dict[int, dict[tuple[str, str], dict[str, Any]]],
+    case: str,
+    seeds: list[int],
 ) -> None:
-    """Per variant, its runs of ``case``: failures, classes and first failure, seed by seed."""
+    """Per variant, then per method of the files ``nine.py`` reads (``portfolio`` there is the
+    first default), its runs of ``case``: failures, classes and first failure, seed by seed."""
     print(f"| {case} | " + " | ".join(f"seed {seed}" for seed in seeds) + " |")
     print("|---" * (len(seeds) + 1) + "|")
-    for name, own in by_variant.items():
+    methods = sorted({method for rows in base.values() for c, method in rows if c == case})
+    listed = [*by_variant.items()] + [
+        (
+            method,
+            {
+                (case, seed): rows[(case, method)]
+                for seed, rows in base.items()
+                if (case, method) in rows
+            },
+        )
+        for method in methods
+    ]
+    for name, own in listed:
         cells = []
         for seed in seeds:
             run = own.get((case, seed))

@@ -6,10 +6,21 @@ import sys
 from pathlib import Path
 
 SCRIPT = Path(__file__).parents[1] / "benchmarks" / "peers" / "nine.py"
+VARIANTS = Path(__file__).parents[1] / "benchmarks" / "portfolio_variants.py"
 
 
 def run(method: str, case: str, classes: list[str], seed: int = 0) -> dict[str, object]:
     return {"method": method, "case": case, "seed": seed, "classes": classes, "failures": 1}
+
+
+def variants_table(variants: Path, peers: Path, *options: str) -> dict[str, list[str]]:
+    """``portfolio_variants.py``'s Markdown table: row label -> cells."""
+    argv = [sys.executable, str(VARIANTS), str(variants), str(peers), *options]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=True)
+    return {
+        cells[1].strip(): [cell.strip() for cell in cells[2:-1]]
+        for cells in (line.split("|") for line in done.stdout.splitlines()[2:])
+    }
 
 
 def leaders(files: list[Path], default: str) -> dict[str, tuple[int, int]]:
@@ -72,18 +83,7 @@ def test_a_portfolio_variant_is_counted_in_the_default_s_place(tmp_path):
             }
         )
     )
-    script = SCRIPT.parents[1] / "portfolio_variants.py"
-    result = subprocess.run(
-        [sys.executable, str(script), str(variants), str(peers), "--seeds", "0"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    )
-    table = {
-        cells[1].strip(): [cell.strip() for cell in cells[2:4]]
-        for cells in (line.split("|") for line in result.stdout.splitlines()[2:])
-    }
+    table = variants_table(variants, peers, "--seeds", "0")
     # The default: 3 classes, as many as cem (and all of the case's classes) in b only; the
     # variant in its place: 4, one run more (a) and one fewer (b), and in both cases as many
     # classes as cem and every class found there.
@@ -105,24 +105,16 @@ def test_portfolio_variants_compare_with_another_variant_and_list_one_case(tmp_p
     runs[0]["first_failure_episode"], runs[1]["first_failure_episode"] = 40, 9
     variants = tmp_path / "variants.json"
     variants.write_text(json.dumps({"runs": runs}))
-    script = SCRIPT.parents[1] / "portfolio_variants.py"
-
-    def table(*options):
-        argv = [sys.executable, str(script), str(variants), str(peers), *options]
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=True)
-        return {
-            cells[1].strip(): [cell.strip() for cell in cells[2:-1]]
-            for cells in (line.split("|") for line in done.stdout.splitlines()[2:])
-        }
-
     # Against "old" (two classes), the default and "new" (one each) have one run with fewer.
-    compared = table("--seeds", "0", "--against", "old")
+    compared = variants_table(variants, peers, "--seeds", "0", "--against", "old")
     assert compared["runs with more / fewer classes than old"] == ["0 / 1", "0 / 0", "0 / 1"]
     assert compared["median first failure"] == ["-", "40", "9"]
     # One case, seed by seed: failures (classes, first failure), "-" where a seed was not run.
-    listed = table("--case", "a", "--seeds", "0", "1")
+    listed = variants_table(variants, peers, "--case", "a", "--seeds", "0", "1")
     assert listed["old: failures (classes, first failure)"] == ["5 (2, 40)", "-"]
     assert listed["new: failures (classes, first failure)"] == ["7 (1, 9)", "3 (1, -)"]
+    # Below the variants, every method of the other files (here the first default).
+    assert listed["portfolio: failures (classes, first failure)"] == ["1 (1, -)", "-"]
 
 
 def test_portfolio_variants_sum_what_each_arm_played_and_found_first(tmp_path):
@@ -142,18 +134,11 @@ def test_portfolio_variants_sum_what_each_arm_played_and_found_first(tmp_path):
     ]
     variants = tmp_path / "variants.json"
     variants.write_text(json.dumps({"runs": runs}))
-    script = SCRIPT.parents[1] / "portfolio_variants.py"
-    argv = [sys.executable, str(script), str(variants), str(peers), "--arms", "v"]
-    done = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=True)
-    rows = {
-        cells[1].strip(): [cell.strip() for cell in cells[2:-1]]
-        for cells in (line.split("|") for line in done.stdout.splitlines()[2:])
-    }
+    rows = variants_table(variants, peers, "--arms", "v")
     # Seeds 0-2 only (the seed-5 run is left out); "other" is no class; y came late (>= 300).
     assert rows["aimed"] == ["1,000", "6", "3", "1", "3.0"]
     assert rows["random"] == ["200", "0", "0", "0", "0.0"]
-    missing = subprocess.run(
-        [*argv[:-1], "w"], capture_output=True, text=True, timeout=60, check=False
-    )
+    argv = [sys.executable, str(VARIANTS), str(variants), str(peers), "--arms", "w"]
+    missing = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
     assert missing.returncode != 0
     assert "no variant 'w'" in missing.stderr
