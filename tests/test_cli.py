@@ -135,6 +135,34 @@ def test_new_sut_writes_a_starting_point_and_refuses_a_folder_in_use(tmp_path: P
     assert (folder / "my_controller.py").read_text() == before
 
 
+@pytest.mark.parametrize(
+    ("arguments", "option"),
+    [
+        (["new-sut", "{out}"], "DIRECTORY"),
+        (["scenarios", "head-on", "--out", "{out}"], "--out"),
+        (["export", "{run}", "--out", "{out}"], "--out"),
+    ],
+)
+def test_an_output_folder_under_a_file_is_one_line_and_exit_2(
+    tmp_path: Path, arguments: list[str], option: str
+) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    run = tmp_path / "run"
+    if "{run}" in arguments:
+        made = command(
+            "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+            "--episodes", 2, "--out", run,
+        )  # fmt: skip
+        assert made.returncode == 0, made.stderr
+    out = tmp_path / "notes.txt" / "folder"
+    done = command(*(a.format(out=out, run=run) for a in arguments))
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"error: {option}: {tmp_path / 'notes.txt'} is a file, not a directory"
+    ]
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
 def test_the_new_controller_drives_its_scenario_and_meets_the_robot_it_is_given(
     tmp_path: Path,
 ) -> None:

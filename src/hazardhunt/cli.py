@@ -125,12 +125,14 @@ def scenarios(
     solver: Annotated[str, typer.Option(help="NMPC solver: fatrop or ipopt.")] = "fatrop",
 ) -> None:
     """Simulate one episode per scenario with a random human and draw each."""
+    from hazardhunt.campaign.config import check_output_location
     from hazardhunt.env.rendering import plot_episode
     from hazardhunt.sim.simulation import Simulation
     from hazardhunt.sut.safety_layer import field_shape
     from hazardhunt.world.scenario import load_scenario
 
     chosen = names or list(BUILTIN_SCENARIOS)
+    check_output_location(out)
     table = Table(
         "scenario", "outcome", "sim time (s)", "min clearance (m)", "emergency stops", "picture"
     )
@@ -802,8 +804,11 @@ def new_sut(
     and a scenario to edit, a campaign file and a README of the next commands."""
     from importlib import resources
 
+    from hazardhunt.campaign.config import check_output_location
+
     if directory.exists() and (not directory.is_dir() or any(directory.iterdir())):
         raise ConfigError(f"{directory}: exists and is not empty; name a new folder")
+    check_output_location(directory, option="DIRECTORY")
     directory.mkdir(parents=True, exist_ok=True)
     templates = resources.files("hazardhunt") / "templates" / "new_sut"
     names = sorted(t.name for t in templates.iterdir() if t.is_file())
@@ -875,7 +880,7 @@ def estimate_command(
     workers: Annotated[int, typer.Option(min=1, max=64, help="Processes that play episodes.")] = 1,
 ) -> None:
     """The command; long because its signature is the command's options."""
-    from hazardhunt.campaign.config import EnvOptions
+    from hazardhunt.campaign.config import EnvOptions, check_output_location
     from hazardhunt.likelihood.estimators import EstimatorParams
     from hazardhunt.likelihood.results import summarise, write_summary
     from hazardhunt.likelihood.run import (
@@ -903,6 +908,7 @@ def estimate_command(
             seed=seed,
         )
     )
+    check_output_location(out)
     estimate_run = EstimateRun(config, out, workers=workers)
     with _transient_bar(err_console) as bar:
         task = bar.add_task(f"estimate ({method})", total=config.episodes)

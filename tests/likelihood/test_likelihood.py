@@ -326,6 +326,37 @@ def test_an_estimate_directory_whose_configuration_does_not_read_is_a_one_line_e
     assert "\n" not in str(error.value)
 
 
+def test_a_directory_that_holds_something_else_is_refused_and_left_as_it_was(tmp_path):
+    config = EstimateConfig(episodes=300, estimator=EstimatorParams(method="mc"))
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text('{"run": {"scenario": "crossing"}}')
+    for directory in (mine, run):
+        before = sorted(path.name for path in directory.iterdir())
+        with pytest.raises(ValueError, match=r": exists and is not an estimate; choose another"):
+            EstimateRun(config, directory, source=ClosedFormEncounters())
+        assert sorted(path.name for path in directory.iterdir()) == before
+    # A configuration half written when an estimate was stopped does not count as other files.
+    (tmp_path / "stopped").mkdir()
+    (tmp_path / "stopped" / "config.json.partial").write_text('{"scen')
+    EstimateRun(config, tmp_path / "stopped", source=ClosedFormEncounters())
+    assert (tmp_path / "stopped" / "config.json").exists()
+
+
+def test_an_out_the_estimate_cannot_write_is_one_line_and_exit_2(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    done = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--out", tmp_path / "notes.txt" / "estimate", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"--out: {tmp_path / 'notes.txt'} is a file, not a directory" in line
+
+
 def test_an_estimate_of_another_configuration_is_not_mixed_in(tmp_path):
     toy = ClosedFormEncounters()
     EstimateRun(

@@ -13,7 +13,7 @@ import tomli_w
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import file_name
+from hazardhunt.campaign.config import check_output_location, file_name
 from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.cases.regression import CASE_FORMAT, CaseError
@@ -46,6 +46,7 @@ def export_cases(
 
     Raises:
         PluginError: ``classifier`` does not load.
+        ConfigError: ``out`` cannot be made a folder or written in (nothing was written).
     """
     results = load_results(directory, None if classifier is None else make_classifier(classifier))
     failures = results.failures
@@ -60,6 +61,7 @@ def export_cases(
     elif not every_failure:
         worst = violations.sort_values(["robustness", "run_id", "episode"], kind="stable")
         violations = worst.drop_duplicates(["scenario", "field", "requirement", "signals"])
+    check_output_location(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     configs: dict[str, Any] = {}

@@ -333,6 +333,7 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     plain Monte Carlo estimate whose budget this one extends (:func:`_check_extension`)."""
     path = directory / "config.json"
     wanted = config.model_dump(mode="json")
+    _check_holds_no_other(directory)
     if path.exists():
         # Read as a configuration, so that settings added since it was written take their
         # defaults: an estimate of an earlier version resumes.
@@ -352,6 +353,25 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(wanted, indent=1) + "\n")
     partial.replace(path)
+
+
+def _check_holds_no_other(directory: Path) -> None:
+    """Raises InputError if ``directory`` holds something other than an estimate: files but
+    no ``config.json`` (a half-written one aside), or the ``config.json`` of something else
+    (a run's, say). A damaged estimate's is left to :func:`load_config` to describe."""
+    if not directory.is_dir():
+        return
+    path = directory / "config.json"
+    if path.exists():
+        try:
+            stored = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return
+        if not isinstance(stored, dict) or "estimator" in stored or "scenario" in stored:
+            return
+    elif all(entry.name.endswith(".partial") for entry in directory.iterdir()):
+        return
+    raise InputError(f"{directory}: exists and is not an estimate; choose another --out")
 
 
 def _check_extension(directory: Path, found: EstimateConfig, config: EstimateConfig) -> None:
