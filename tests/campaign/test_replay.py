@@ -110,17 +110,27 @@ def test_an_unfinished_run_is_a_clear_error(run_with_failures, tmp_path):
 
 
 def test_an_unknown_failure_is_a_clear_error(run_with_failures):
-    done = hazardhunt("replay", run_with_failures, "--episode", 999_999)
-    assert done.returncode == 2
     failures = pd.read_parquet(run_with_failures / "failures.parquet")["episode"].tolist()
     shown = ", ".join(map(str, failures[:10])) + (" ..." if len(failures) > 10 else "")
+    recorded = (
+        f"1 failure, in episode {shown})"
+        if len(failures) == 1
+        else f"{len(failures)} failures, in episodes {shown})"
+    )
+    played = pd.read_parquet(run_with_failures / "episodes.parquet")
+    done = hazardhunt("replay", run_with_failures, "--episode", 999_999)
+    assert done.returncode == 2
     assert done.stderr.strip() == (
-        f"error: {run_with_failures}: no failure in episode 999999 (the run recorded "
-        + (
-            f"1 failure, in episode {shown})"
-            if len(failures) == 1
-            else f"{len(failures)} failures, in episodes {shown})"
-        )
+        f"error: {run_with_failures}: no failure in episode 999999 (the run played episodes 0 "
+        f"to {len(played) - 1} and recorded {recorded}"
+    )
+    # An episode it played that did not fail says how it ended.
+    safe = played[played["outcome"] != "failure"].iloc[0]
+    done = hazardhunt("replay", run_with_failures, "--episode", int(safe["episode"]))
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: {run_with_failures}: no failure in episode {safe['episode']} (it ended as "
+        f"{safe['outcome']!r}; the run recorded {recorded}"
     )
 
 

@@ -124,9 +124,26 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
             more = " ..." if len(failures) > 10 else ""
             recorded = f"{len(failures)} failures, in episodes {known}{more}"
         raise ReplayError(
-            f"{run_directory}: no failure in episode {episode} (the run recorded {recorded})"
+            f"{run_directory}: no failure in episode {episode} "
+            f"({_what_became_of(run_directory, episode)} {recorded})"
         )
     return config, match.iloc[0].to_dict()
+
+
+def _what_became_of(run_directory: Path, episode: int) -> str:
+    """The start of the reason why ``episode`` has no failure to replay: how it ended, or which
+    episodes the run played (from ``episodes.parquet``; just "the run recorded" without it)."""
+    try:
+        played = pd.read_parquet(run_directory / "episodes.parquet", columns=["episode", "outcome"])
+    except (OSError, ValueError):
+        return "the run recorded"
+    row = played[played["episode"] == episode]
+    if not row.empty:
+        return f"it ended as {row['outcome'].iloc[0]!r}; the run recorded"
+    if played.empty:
+        return "the run played no episode and recorded"
+    first, last = int(played["episode"].min()), int(played["episode"].max())
+    return f"the run played episodes {first} to {last} and recorded"
 
 
 def load_violations(run_directory: Path, episode: int) -> list[dict[str, Any]]:

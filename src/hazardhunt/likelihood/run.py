@@ -182,7 +182,8 @@ class EstimateRun:
         workers: Processes that play a batch at once.
 
         Raises:
-            InputError: The directory holds another estimate, or the budget is too small.
+            InputError: The directory holds another estimate or something else, or the
+                budget is too small.
             PluginError: A plug-in of the SUT does not load, or fails on a trial episode;
                 nothing is written.
         """
