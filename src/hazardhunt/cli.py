@@ -493,8 +493,15 @@ def replay(
     A run whose controller or safety layer is a plug-in replays only with that plug-in named
     (--controller, --safety-layer) or with --trust-plugins: a run directory is data.
     """
+    from hazardhunt.campaign.config import check_output_location
     from hazardhunt.campaign.replay import replay_failure
 
+    if gif is not None:
+        if gif.is_dir():
+            raise ConfigError(
+                f"--gif: {gif} is a folder; name a file, such as {gif / 'failure.gif'}"
+            )
+        check_output_location(gif.parent, option="--gif")
     replay = replay_failure(
         run_directory,
         episode,
