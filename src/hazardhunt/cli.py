@@ -126,10 +126,6 @@ def scenarios(
 ) -> None:
     """Simulate one episode per scenario with a random human and draw each."""
     from hazardhunt.campaign.config import check_output_location
-    from hazardhunt.env.rendering import plot_episode
-    from hazardhunt.sim.simulation import Simulation
-    from hazardhunt.sut.safety_layer import field_shape
-    from hazardhunt.world.scenario import load_scenario
 
     chosen = names or list(BUILTIN_SCENARIOS)
     check_output_location(out)
@@ -141,38 +137,51 @@ def scenarios(
         task = progress.add_task("simulating", total=len(chosen))
         for name in chosen:
             progress.update(task, description=f"simulating {name}")
-            scenario = load_scenario(name)
-            try:
-                field_shape(scenario, field)
-            except ValueError as error:
-                raise typer.BadParameter(str(error), param_hint="--field") from None
-            try:
-                simulation = Simulation.build(scenario, field, solver=solver)
-            except ValueError as error:
-                raise typer.BadParameter(str(error), param_hint="--solver") from None
-            result = simulation.simulate(lambda _: rng.uniform(-1.0, 1.0, size=2))
-            summary = result.summary
-            stem = Path(name).stem
-            picture = plot_episode(
-                out / f"{stem}.png",
-                simulation.scenario,
-                simulation.route,
-                result.trajectory or (),
-                simulation.field,
-                title=f"{stem}, field {field}: {summary.outcome} at {summary.sim_time:.1f} s",
-                outcome=summary.outcome,
-            )
-            table.add_row(
-                stem,
-                str(summary.outcome),
-                f"{summary.sim_time:.1f}",
-                f"{summary.min_clearance:.2f}",
-                str(summary.emergency_stops),
-                str(picture),
-            )
+            table.add_row(*_simulate_and_draw(name, field, solver, rng, out))
             progress.advance(task)
     console.print(table)
     console.print(f"Pictures written to [bold]{out.resolve()}[/bold]")
+
+
+def _simulate_and_draw(
+    name: str, field: str, solver: str, rng: np.random.Generator, out: Path
+) -> tuple[str, ...]:
+    """One episode of scenario ``name`` with a random human, drawn into ``out``: its row of
+    the ``scenarios`` command's table."""
+    from hazardhunt.env.rendering import plot_episode
+    from hazardhunt.sim.simulation import Simulation
+    from hazardhunt.sut.safety_layer import field_shape
+    from hazardhunt.world.scenario import load_scenario
+
+    scenario = load_scenario(name)
+    try:
+        field_shape(scenario, field)
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--field") from None
+    try:
+        simulation = Simulation.build(scenario, field, solver=solver)
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--solver") from None
+    result = simulation.simulate(lambda _: rng.uniform(-1.0, 1.0, size=2))
+    summary = result.summary
+    stem = Path(name).stem
+    picture = plot_episode(
+        out / f"{stem}.png",
+        simulation.scenario,
+        simulation.route,
+        result.trajectory or (),
+        simulation.field,
+        title=f"{stem}, field {field}: {summary.outcome} at {summary.sim_time:.1f} s",
+        outcome=summary.outcome,
+    )
+    return (
+        stem,
+        str(summary.outcome),
+        f"{summary.sim_time:.1f}",
+        f"{summary.min_clearance:.2f}",
+        str(summary.emergency_stops),
+        str(picture),
+    )
 
 
 ControllerOption = Annotated[
@@ -493,15 +502,9 @@ def replay(
     A run whose controller or safety layer is a plug-in replays only with that plug-in named
     (--controller, --safety-layer) or with --trust-plugins: a run directory is data.
     """
-    from hazardhunt.campaign.config import check_output_location
     from hazardhunt.campaign.replay import replay_failure
 
-    if gif is not None:
-        if gif.is_dir():
-            raise ConfigError(
-                f"--gif: {gif} is a folder; name a file, such as {gif / 'failure.gif'}"
-            )
-        check_output_location(gif.parent, option="--gif")
+    _check_gif(gif)
     replay = replay_failure(
         run_directory,
         episode,
@@ -531,6 +534,18 @@ def replay(
         console.print(f"animation written to [bold]{gif}[/bold]")
     if not replay.matches:
         raise typer.Exit(1)
+
+
+def _check_gif(gif: Path | None) -> None:
+    """Raises ConfigError unless an animation can be written to ``gif`` (None: none asked
+    for), before anything is replayed."""
+    from hazardhunt.campaign.config import check_output_location
+
+    if gif is None:
+        return
+    if gif.is_dir():
+        raise ConfigError(f"--gif: {gif} is a folder; name a file, such as {gif / 'failure.gif'}")
+    check_output_location(gif.parent, option="--gif")
 
 
 @app.command(cls=_Command)
