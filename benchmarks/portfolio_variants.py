@@ -76,13 +76,13 @@ def main() -> None:
             args.arms, list(variant_runs(by_variant, "--arms", args.arms).values()), args.late
         )
         return
-    print("| | " + " | ".join([DEFAULT, *names]) + " |")
-    print("|---" * (len(names) + 2) + "|")
     against = (
         (args.against, variant_runs(by_variant, "--against", args.against))
         if args.against
         else ("the default", {})
     )
+    print("| | " + " | ".join([DEFAULT, *names]) + " |")
+    print("|---" * (len(names) + 2) + "|")
     columns = [summary(base, {}, args.seeds, against)]
     for name in names:
         columns.append(summary(base, by_variant[name], args.seeds, against))

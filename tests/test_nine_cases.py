@@ -142,3 +142,9 @@ def test_portfolio_variants_sum_what_each_arm_played_and_found_first(tmp_path):
     missing = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
     assert missing.returncode != 0
     assert "no variant 'w'" in missing.stderr
+    # Nor does an unknown variant to compare against print half a table first.
+    argv[-2:] = ["--against", "w"]
+    missing = subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+    assert missing.returncode != 0
+    assert missing.stdout == ""
+    assert "--against: no variant 'w'" in missing.stderr
