@@ -447,6 +447,7 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert f"{summary['probability']['probability']:.3g}" in page
     assert page.count("data:image/png") >= 2  # the convergence and a most likely failure
     assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
+    commands_for_runs_name_an_estimate(tmp_path / "est", likeliest["episode"])
     damaged_estimates_are_named_and_mend(tmp_path / "est", done.args[3:])
     # More episodes for the same estimate: its batch size is kept without --batch-size.
     command = [*done.args[3:]]
@@ -456,6 +457,22 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert grown.returncode == 0, grown.stderr
     assert json.loads((tmp_path / "est" / "estimate.json").read_text())["episodes"] == 150
     assert len(list((tmp_path / "est" / "batches").glob("*.parquet"))) == 3
+
+
+def commands_for_runs_name_an_estimate(directory, episode):
+    """``replay``, ``export`` and ``copy`` of an estimate say that it is one, and which command
+    shows it, in one line, and write nothing."""
+    elsewhere = directory.parent / "elsewhere"
+    for command in (
+        ("replay", directory, "--episode", episode),
+        ("export", directory, "--out", elsewhere),
+        ("copy", directory, "--out", elsewhere),
+    ):
+        refused = hazardhunt(*command, cwd=ROOT)
+        assert refused.returncode == 2
+        [line] = refused.stderr.strip().splitlines()
+        assert f"{directory}: an estimate, not a run; 'hazardhunt report {directory}'" in line
+    assert not elsewhere.exists()
 
 
 def damaged_estimates_are_named_and_mend(directory, command):

@@ -13,6 +13,7 @@ from pydantic import ValidationError
 
 from hazardhunt.campaign.config import CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
+from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import find_damage, left_out
 from hazardhunt.errors import InputError
@@ -210,7 +211,7 @@ def _finished_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, st
             f"{directory}: not a run or campaign directory (no config.json or campaign.json)"
         )
     if not is_finished(directory):
-        raise ResultsError(f"{directory}: the run has not finished (no summary.json)")
+        raise ResultsError(not_finished(directory))
     damage = find_damage(directory)
     if damage is not None:
         raise ResultsError(f"{directory}: the run is damaged ({damage}); run it again")

@@ -21,6 +21,7 @@ from hazardhunt.campaign.config import (
     read_stored_campaign,
 )
 from hazardhunt.campaign.records import campaign_totals
+from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
     LEAVABLE,
@@ -62,7 +63,7 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
     if not (source / "config.json").is_file():
         raise ConfigError(f"{source}: not a run or campaign directory")
     if not is_finished(source):
-        raise ConfigError(f"{source}: the run has not finished (no summary.json)")
+        raise ConfigError(not_finished(source))
     if (damage := find_damage(source)) is not None:
         raise ConfigError(f"{source}: the run is damaged ({damage}); run it again")
     if destination.exists() and any(destination.iterdir()):

@@ -69,6 +69,19 @@ class ReplayResult:
         )
 
 
+def not_finished(directory: Path) -> str:
+    """Why ``directory``, which has a ``config.json`` but no ``summary.json``, holds no finished
+    run: an estimate's directory (``hazardhunt estimate``) is called one, as its configuration
+    says; anything else is a run that has not finished."""
+    try:
+        stored = json.loads((directory / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        stored = None
+    if isinstance(stored, dict) and "estimator" in stored and "run" not in stored:
+        return f"{directory}: an estimate, not a run; 'hazardhunt report {directory}' shows it"
+    return f"{directory}: the run has not finished (no summary.json)"
+
+
 def load_run_config(run_directory: Path) -> RunConfig:
     """A run's configuration, from ``config.json``.
 
@@ -83,6 +96,8 @@ def load_run_config(run_directory: Path) -> RunConfig:
         stored = json.loads(config_path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as error:
         raise ReplayError(f"{config_path}: cannot be read as JSON: {error}") from None
+    if isinstance(stored, dict) and "estimator" in stored and "run" not in stored:
+        raise ReplayError(not_finished(run_directory))
     if not isinstance(stored, dict) or not isinstance(stored.get("run"), dict):
         raise ReplayError(f"{config_path}: not a run's configuration (no run table)")
     try:
@@ -102,7 +117,7 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
     """
     config = load_run_config(run_directory)
     if not is_finished(run_directory):
-        raise ReplayError(f"{run_directory}: the run has not finished (no summary.json)")
+        raise ReplayError(not_finished(run_directory))
     damage = find_damage(run_directory)
     if damage is not None:
         raise ReplayError(f"{run_directory}: the run is damaged ({damage}); nothing replayed")
