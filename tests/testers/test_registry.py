@@ -62,7 +62,7 @@ def test_unknown_testers_and_parameters_are_clear_errors(name, params, message):
         ("random", {"attempts": True}, "attempts: must be a whole number, not True"),
         ("random", {"attempts": 0}, "attempts: must be a whole number >= 1, not 0"),
         ("cem", {"smoothing": math.nan}, "smoothing: must be a finite number, not nan"),
-        ("cem", {"n_workers": 1000}, "workers: must be less than or equal to 64, not 1000"),
+        ("cem", {"n_workers": 1000}, "n_workers (now workers): must be less than or equal to 64"),
         ("qd", {"bins": [8, "3", 3]}, 'bins.1: must be a whole number, not "3"'),
         ("qd", {"bins": [1000, 1000, 3]}, "bins: must be one whole number >= 1 per measure"),
         ("ppo-max", {"learning_rate": 0}, "learning_rate: must be a number in (0, 1], not 0"),

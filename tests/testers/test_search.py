@@ -75,7 +75,11 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
 @pytest.mark.parametrize(
     ("tester", "params", "message"),
     [
-        ("cem", {"population": 1}, "batch_size: must be greater than or equal to 2, not 1"),
+        (
+            "cem",
+            {"population": 1},
+            r"population \(now batch_size\): must be greater than or equal to 2, not 1",
+        ),
         ("cem", {"elite_fraction": 1.5}, "elite_fraction: must be less than or equal to 1"),
         ("cem", {"populaton": 10}, "populaton: unknown parameter"),
         ("cem", {"population": 8, "batch_size": 8}, "population: is the earlier name of"),
@@ -83,7 +87,11 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("qd", {"bins": [4, 4]}, "bins: must be one whole number >= 1 per measure"),
         ("qd", {"algorithm": "nsga"}, "algorithm: must be 'cma-me', 'cma-mae' or 'map-elites'"),
         ("qd", {"es": "adam"}, "es: must be 'cma_es', 'sep_cma_es' or 'lm_ma_es'"),
-        ("qd", {"clear_path": "yes"}, 'space.detour: must be true or false, not "yes"'),
+        (
+            "qd",
+            {"clear_path": "yes"},
+            r'clear_path \(now space.detour\): must be true or false, not "yes"',
+        ),
         (
             "cem",
             {"space": "sideways"},
@@ -94,15 +102,21 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("cem", {"space": {"kind": "aim", "detours": True}}, "space.detours: unknown setting"),
         ("cem", {"space": 3, "clear_path": True}, "space: must be a table, not 3"),
         ("cem", {"noise_exponent": -1}, "noise_exponent: must be greater than or equal to 0"),
-        ("cem", {"n_workers": 65}, "workers: must be less than or equal to 64, not 65"),
+        ("cem", {"n_workers": 65}, r"n_workers \(now workers\): must be less than or equal to 64"),
+        ("cem", {"workers": 65}, "workers: must be less than or equal to 64, not 65"),
         ("qd", {"aim": True}, "aim: unknown parameter"),
-        ("qd", {"probes": 1}, "space.plain_attacks: must be true or false, not 1"),
+        ("qd", {"probes": 1}, r"probes \(now space.plain_attacks\): must be true or false, not 1"),
         ("ppo-novelty", {"novelty": -1}, "novelty: must be a number from 0 to"),
         ("portfolio", {"arms": [{"name": "a", "method": "mcts"}]}, "arms.0.method: must be one"),
         (
             "portfolio",
             {"arms": [{"name": "a", "method": "cem", "params": {"batch_size": 1}}]},
             "arms: arm 'a': batch_size: must be greater than or equal to 2, not 1",
+        ),
+        (
+            "portfolio",
+            {"arms": [{"name": "a", "method": "cem", "params": {"population": "ten"}}]},
+            r"arms: arm 'a': population \(now batch_size\): must be a whole number",
         ),
         (
             "portfolio",

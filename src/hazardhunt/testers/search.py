@@ -129,7 +129,7 @@ def parse_params(tester: str, model: type[ParamsT], params: Mapping[str, Any]) -
         key, separator, rest = message.partition(": ")
         if not location and separator and " " not in key:  # a check of several settings
             raise TesterParameterError(tester, key, rest) from None
-        key = ".".join(location) or next(iter(params), "parameters")
+        key = _as_given(".".join(location), params) or next(iter(params), "parameters")
         if first["type"] == "extra_forbidden":
             known = ", ".join(schema_keys(model, location[:-1]))
             problem = f"unknown parameter; the tester takes {known}"
@@ -140,6 +140,17 @@ def parse_params(tester: str, model: type[ParamsT], params: Mapping[str, Any]) -
         if first["type"] != "value_error" and ", not " not in message and scalar:  # a range
             message += f", not {first['input']!r}"
         raise TesterParameterError(tester, key, message) from None
+
+
+def _as_given(key: str, params: Mapping[str, Any]) -> str:
+    """``key`` as the user gave it: a setting given by its earlier name (:data:`RENAMED`,
+    :data:`SPACE_FLAGS`) is named by that, with its name now."""
+    earlier = {new: old for old, new in RENAMED.items() if old in params}
+    earlier |= {f"space.{new}": old for old, new in SPACE_FLAGS.items() if old in params}
+    for new, old in earlier.items():
+        if key == new or key.startswith(f"{new}."):
+            return f"{old} (now {key})"
+    return key
 
 
 @dataclass(frozen=True)
