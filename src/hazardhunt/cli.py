@@ -148,12 +148,17 @@ def _simulate_and_draw(
 ) -> tuple[str, ...]:
     """One episode of scenario ``name`` with a random human, drawn into ``out``: its row of
     the ``scenarios`` command's table."""
+    from hazardhunt.campaign.config import route_problem
     from hazardhunt.env.rendering import plot_episode
     from hazardhunt.sim.simulation import Simulation
     from hazardhunt.sut.safety_layer import field_shape
-    from hazardhunt.world.scenario import load_scenario
+    from hazardhunt.world.bodies import RobotParams
+    from hazardhunt.world.scenario import ScenarioError, load_scenario
 
     scenario = load_scenario(name)
+    problem = route_problem(name, RobotParams())
+    if problem is not None:
+        raise ScenarioError(problem)
     try:
         field_shape(scenario, field)
     except ValueError as error:

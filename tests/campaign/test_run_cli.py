@@ -228,6 +228,11 @@ start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
             id="unreachable-goal",
         ),
         pytest.param(
+            ("x = 10.0, y = 5.0", "x = 2.3, y = 10.2"),
+            "human.start: (2.3, 10.2) touches the robot at its start: every episode would begin",
+            id="human-touching-the-robot",
+        ),
+        pytest.param(
             ("[human]", "[fields.wide]\ndiameter = inf\n[human]"),
             "fields.wide.diameter: diameter must be a positive number of m, not inf",
             id="inf-field-diameter",
@@ -246,6 +251,24 @@ def test_a_scenario_value_that_cannot_work_is_one_line_before_anything_is_writte
     [line] = done.stderr.strip().splitlines()
     assert f"{scenario}: {key}" in line
     assert not (tmp_path / "results").exists()
+
+
+def test_the_scenarios_command_names_what_is_wrong_with_a_scenario_file(tmp_path):
+    unreachable = tmp_path / "unreachable.toml"
+    unreachable.write_text(
+        SCENARIO.replace("goal = { x = 18.0, y = 10.0 }", "goal = { x = 5.0, y = 8.8 }")
+    )
+    touching = tmp_path / "touching.toml"
+    touching.write_text(SCENARIO.replace("x = 10.0, y = 5.0", "x = 2.3, y = 10.2"))
+    for scenario, says in (
+        (unreachable, "robot.goal: the robot cannot get there: route point (5.00, 8.80)"),
+        (touching, "human.start: (2.3, 10.2) touches the robot at its start"),
+    ):
+        done = hazardhunt("scenarios", scenario, "--out", tmp_path / "pictures")
+        assert done.returncode == 2
+        [line] = done.stderr.strip().splitlines()
+        assert f"{scenario}: {says}" in line
+    assert not (tmp_path / "pictures").exists()
 
 
 def test_an_out_that_cannot_be_written_is_one_line(tmp_path):

@@ -48,7 +48,8 @@ from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
 from hazardhunt.textfiles import format_validation_error, loads_toml
-from hazardhunt.world.bodies import RobotParams
+from hazardhunt.world.bodies import HumanParams, RobotParams
+from hazardhunt.world.geometry import point_rectangle_clearance, to_body_frame
 from hazardhunt.world.scenario import (
     BUILTIN_SCENARIOS,
     Scenario,
@@ -204,6 +205,14 @@ def _route_version_problem(
     name: str, version: tuple[int, int] | None, robot: RobotParams
 ) -> str | None:
     scenario = cached_scenario(name)
+    human = scenario.human_start.position
+    start = scenario.robot_start
+    forward, left = to_body_frame(human, start.x, start.y, start.heading)
+    if point_rectangle_clearance(forward, left, robot.length, robot.width) < HumanParams.radius:
+        return (
+            f"{scenario.source}: human.start: ({human[0]:g}, {human[1]:g}) touches the robot at "
+            "its start: every episode would begin in contact; place the human farther away"
+        )
     try:
         scenario_route(scenario, robot.width)
     except RoutePlanningError as error:
@@ -216,7 +225,8 @@ def _route_version_problem(
 
 def route_problem(name: str, robot: RobotParams) -> str | None:
     """Why the robot cannot drive the route of scenario ``name`` (naming the file and the
-    route point), None if it can; planned once per version of the file and robot."""
+    route point), or why no episode of it can be played (the human starts touching the robot),
+    None if it can; planned once per version of the file and robot."""
     return _route_version_problem(name, _scenario_version(name), robot)
 
 
