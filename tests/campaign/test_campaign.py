@@ -506,6 +506,29 @@ def test_a_campaign_file_that_is_a_directory_is_one_line(tmp_path: Path) -> None
     assert not out.exists()
 
 
+def test_a_campaign_resumed_after_a_scenario_file_changed_plays_its_runs_again(
+    tmp_path: Path,
+) -> None:
+    builtin = Path(load_scenario("head-on").source)
+    mine = tmp_path / "mine.toml"
+    text = builtin.read_text().replace(
+        'map = "shopfloor.toml"', f'map = "{builtin.parent / "shopfloor.toml"}"'
+    )
+    mine.write_text(text)
+    file, out = tmp_path / "grid.toml", tmp_path / "campaign"
+    file.write_text(GRID.replace('"head-on", "overtaking"', '"mine.toml"').replace("0, 1", "0"))
+    assert hazardhunt("campaign", file, "--out", out).returncode == 0
+    run = out / "runs" / "mine__2m__random__seed0"
+    played = json.loads((run / "scenario.json").read_text())["human"]["start"]
+    # Moved 1 m along the aisle: the run made before was not played on this floor.
+    mine.write_text(text.replace(f"x = {played['x']:.1f}", f"x = {played['x'] - 1:.1f}"))
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert f"it was played on {mine} before the file changed); running it again" in result.stdout
+    again = json.loads((run / "scenario.json").read_text())["human"]["start"]
+    assert again["x"] == played["x"] - 1
+
+
 def test_an_out_under_a_file_is_one_line(campaign_file: Path, tmp_path: Path) -> None:
     (tmp_path / "notes.txt").write_text("mine")
     result = hazardhunt("campaign", campaign_file, "--out", tmp_path / "notes.txt" / "out")

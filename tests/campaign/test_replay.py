@@ -4,6 +4,7 @@ replaying, reporting or exporting it imports no plug-in it names unless the user
 import json
 import shutil
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -17,6 +18,7 @@ from hazardhunt.campaign.replay import replay_failure
 from hazardhunt.campaign.run import record_run
 from hazardhunt.campaign.store import file_checksums, read_trajectory
 from hazardhunt.cases import export_cases, regress_case
+from hazardhunt.world.scenario import load_scenario
 from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
 
@@ -328,3 +330,36 @@ def test_a_requirements_violation_replays_by_the_formula_recorded_with_it(tmp_pa
     violations.to_parquet(directory / "violations.parquet")
     signed(directory)
     assert not replay_failure(directory, int(row["episode"])).matches
+
+
+def test_a_run_replays_and_exports_the_scenario_it_played_after_its_file_changed(tmp_path):
+    built_in = Path(load_scenario("overtaking").source)
+    shutil.copy(built_in.parent / "shopfloor.toml", tmp_path / "shopfloor.toml")
+    mine = tmp_path / "mine.toml"
+    mine.write_text(built_in.read_text())
+    directory = tmp_path / "run"
+    config = RunConfig(scenario=str(mine), field="none", tester="random", seed=0, episodes=20)
+    assert record_run(config, directory)["failures"] >= 1, "the fixture needs failures"
+    failures = pd.read_parquet(directory / "failures.parquet")
+    # The user moves the human 1 m back in the file: the run's episodes were not played so.
+    mine.write_text(built_in.read_text().replace("x = 5.0, y = 10.0", "x = 4.0, y = 10.0"))
+    for episode in failures["episode"]:
+        assert replay_failure(directory, int(episode)).matches
+    episode = int(failures["episode"].iloc[0])
+    done = hazardhunt("replay", directory, "--episode", episode)
+    assert done.returncode == 0, done.stderr
+    assert "reproduced" in done.stdout
+    assert f"{mine}: has changed since the run; replayed on the scenario the run" in done.stderr
+    cases = export_cases(directory, tmp_path / "cases")
+    assert cases
+    for case in cases:
+        assert "x = 5.0" in case.read_text()  # the human where the run had it
+        assert regress_case(case).verdict == "still fails"
+    # Run again into the same folder, the run made on the old file is played anew on the new.
+    again = hazardhunt(
+        "run", "--scenario", mine, "--field", "none", "--tester", "random", "--seed", 0,
+        "--episodes", 20, "--out", directory,
+    )  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert f"played on {mine} before the file changed; running it again" in again.stderr
+    assert json.loads((directory / "scenario.json").read_text())["human"]["start"]["x"] == 4.0

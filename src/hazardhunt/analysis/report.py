@@ -45,6 +45,7 @@ from hazardhunt.campaign.replay import (
     names_sut_plugins,
     replay_actions,
 )
+from hazardhunt.campaign.scenario_record import recorded_scenario
 from hazardhunt.campaign.store import (
     REQUIREMENT_COLUMN,
     left_out,
@@ -420,7 +421,8 @@ def _reward_hacking(report: _Report, results: Results) -> None:
     if typical is None:
         section.blocks.append(Text("No episode matched the loitering pattern."))
         return
-    config = load_run_config(results.run_directory(str(typical["run_id"])))
+    directory = results.run_directory(str(typical["run_id"]))
+    config = load_run_config(directory)
     if names_sut_plugins(config):
         section.blocks.append(
             Text(
@@ -430,7 +432,9 @@ def _reward_hacking(report: _Report, results: Results) -> None:
             )
         )
         return
-    simulation, _ = replay_actions(config, typical["actions"])
+    simulation, _ = replay_actions(
+        config, typical["actions"], scenario=recorded_scenario(directory)
+    )
     times, captions = loitering_frames(simulation)
     path = plot_frames(report.figures / "loitering.png", simulation, times, captions)
     report.image(
@@ -533,7 +537,7 @@ def _failure_pictures(
     if "trajectories" in left_out(directory):
         return "not drawn: a copy without trajectories (hazardhunt replay draws it)"
     config = load_run_config(directory)
-    scenario = load_scenario(config.scenario)
+    scenario = recorded_scenario(directory) or load_scenario(config.scenario)
     robot = config.env.robot
     recorded = RecordedEpisode(
         scenario,

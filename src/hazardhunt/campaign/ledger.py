@@ -15,6 +15,7 @@ from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_differen
 from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary, campaign_totals
 from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
+from hazardhunt.campaign.scenario_record import scenario_changed
 from hazardhunt.campaign.store import find_damage, write_json_atomic
 
 
@@ -123,9 +124,11 @@ def _not_this_run(directory: Path, run: RunConfig) -> str | None:
         stored = load_run_config(directory)
     except ReplayError:
         return "its config.json does not read as a run's configuration"
-    if stored == run:
-        return None
-    return f"it holds a run of another configuration ({first_difference(stored, run)})"
+    if stored != run:
+        return f"it holds a run of another configuration ({first_difference(stored, run)})"
+    if scenario_changed(run.scenario, directory):
+        return f"it was played on {run.scenario} before the file changed"
+    return None
 
 
 def _ledger_entry(summary: RunSummary, status: str) -> LedgerEntry:

@@ -23,11 +23,17 @@ from pydantic import ValidationError
 from hazardhunt.campaign.config import STORED, RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import is_finished, simulation_of
+from hazardhunt.campaign.scenario_record import (
+    SCENARIO_FILE,
+    recorded_scenario,
+    scenario_changed,
+)
 from hazardhunt.campaign.store import find_damage
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.textfiles import format_validation_error
+from hazardhunt.world.scenario import Scenario
 
 TIME_TOLERANCE = 1e-9
 """Largest difference of the end time between the record and the replay, in s."""
@@ -212,9 +218,14 @@ def allowed_sut(
 
 
 def replay_actions(
-    config: RunConfig, actions: Any, formulas: Mapping[str, str] | None = None, where: str = ""
+    config: RunConfig,
+    actions: Any,
+    formulas: Mapping[str, str] | None = None,
+    where: str = "",
+    scenario: Scenario | None = None,
 ) -> tuple[Simulation, EpisodeResult]:
-    """Play one episode of a run's simulation with recorded actions, judged by the
+    """Play one episode of a run's simulation with recorded actions, on ``scenario`` (the
+    one the run recorded, :func:`recorded_scenario`; None: its scenario file), judged by the
     requirements ``formulas`` (name: formula, as recorded; not the run's requirement files,
     which need not be where they were); the simulation after it and the episode's result
     (with its trajectory). This imports the plug-ins ``config`` names: a configuration read
@@ -223,7 +234,7 @@ def replay_actions(
     Raises:
         ReplayError: A formula does not parse (``where``: the file it came from).
     """
-    simulation = simulation_of(config.model_copy(update={"requirements": []}))
+    simulation = simulation_of(config.model_copy(update={"requirements": []}), scenario)
     period = simulation.controller.control_period
     simulation.requirements = tuple(
         _recorded_requirement(name, formula, where, period)
@@ -271,7 +282,14 @@ def replay_failure(
     # which may have changed or moved since.
     formulas = {str(v["requirement"]): str(v.get("formula") or "") for v in violations}
     where = str(run_directory / "violations.parquet")
-    simulation, result = replay_actions(config, row["actions"], formulas, where)
+    # On the scenario the run played, which its file may no longer say.
+    scenario = recorded_scenario(run_directory)
+    if announce is not None and scenario_changed(config.scenario, run_directory):
+        announce(
+            f"{config.scenario}: has changed since the run; replayed on the scenario the run "
+            f"recorded ({run_directory / SCENARIO_FILE})"
+        )
+    simulation, result = replay_actions(config, row["actions"], formulas, where, scenario)
     return ReplayResult(
         episode=episode,
         recorded_outcome=str(row["outcome"]),

@@ -45,6 +45,7 @@ from hazardhunt.campaign.plugins import (
     make_safety_layer,
 )
 from hazardhunt.campaign.records import RunSummary, cpu_seconds
+from hazardhunt.campaign.scenario_record import SCENARIO_FILE, scenario_changed
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.env.agv import AGVEnv
@@ -56,7 +57,7 @@ from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
 from hazardhunt.testers.objective import objective_of
-from hazardhunt.world.scenario import Scenario
+from hazardhunt.world.scenario import Scenario, scenario_data
 
 
 @dataclass(frozen=True)
@@ -108,10 +109,10 @@ def build_simulation(
     return simulation
 
 
-def simulation_of(config: RunConfig) -> Simulation:
-    """The simulation of a run's configuration."""
+def simulation_of(config: RunConfig, scenario: Scenario | None = None) -> Simulation:
+    """The simulation of a run's configuration, on ``scenario`` if given (one a run recorded)."""
     return build_simulation(
-        config.scenario,
+        config.scenario if scenario is None else scenario,
         config.field,
         config.env,
         config.controller,
@@ -179,6 +180,7 @@ def record_run(
             "started_at": started_at,
         },
     )
+    write_json_atomic(directory / SCENARIO_FILE, scenario_data(config.scenario))
     replay_keys = {
         "scenario": config.scenario,
         "field": config.field,
@@ -410,9 +412,12 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
             f"{out}: holds a finished run of another configuration "
             f"({first_difference(found, config)}); choose another --out"
         )
-    if damage is not None:
+    why = None if damage is None else f"damaged ({damage})"
+    if why is None and scenario_changed(config.scenario, out):
+        why = f"played on {config.scenario} before the file changed"
+    if why is not None:
         if console is not None:
-            console.print(f"{out}: damaged ({damage}); running it again")
+            console.print(f"{out}: {why}; running it again")
         shutil.rmtree(out)
         return None
     if console is not None:

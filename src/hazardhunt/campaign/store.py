@@ -3,6 +3,7 @@
 Layout of a run directory::
 
     config.json          the resolved configuration, package version, seeds
+    scenario.json        the scenario played, its map inlined (its file may change later)
     episodes.parquet     one row per episode (SPEC 7)
     failures.parquet     one row per failure: what replays it (scenario, field, seed, actions)
                          and its class (SPEC 6)

@@ -16,6 +16,7 @@ from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import check_output_location, file_name
 from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
+from hazardhunt.campaign.scenario_record import recorded_scenario, recorded_scenario_data
 from hazardhunt.cases.regression import CASE_FORMAT, CaseError
 from hazardhunt.world.scenario import scenario_data
 
@@ -68,14 +69,21 @@ def export_cases(
 
     def config_of(run_id: str) -> Any:
         if run_id not in configs:
-            configs[run_id] = load_run_config(results.run_directory(run_id))
+            directory = results.run_directory(run_id)
+            config = load_run_config(directory)
+            # The scenario the run played, which its file may no longer say.
+            scenario = None
+            if recorded_scenario(directory) is not None:  # it reads as a scenario
+                scenario = recorded_scenario_data(directory)
+            configs[run_id] = (config, scenario or scenario_data(config.scenario))
         return configs[run_id]
 
     for _, row in chosen.sort_values(["run_id", "episode"]).iterrows():
-        config = config_of(str(row["run_id"]))
-        written.append(_write_case(out, _case(row, config, classifier or config.classifier)))
+        config, scenario = config_of(str(row["run_id"]))
+        case = _case(row, config, scenario, classifier or config.classifier)
+        written.append(_write_case(out, case))
     for _, row in violations.sort_values(["run_id", "episode", "requirement"]).iterrows():
-        written.append(_write_case(out, _violation_case(row, config_of(str(row["run_id"])))))
+        written.append(_write_case(out, _violation_case(row, *config_of(str(row["run_id"])))))
     return written
 
 
@@ -92,11 +100,13 @@ def _write_case(out: Path, case: dict[str, Any]) -> Path:
     return path
 
 
-def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[str, Any]:
+def _case(
+    row: pd.Series, config: Any, scenario: dict[str, Any], classifier: PluginSpec | None
+) -> dict[str, Any]:
     """The contents of one failure's case file, its class given by ``classifier`` (None: the
     built-in one)."""
     failure_class = str(row.get("class", "other"))
-    case = _episode_case(row, config, f"{row['run_id']}__episode{int(row['episode'])}")
+    case = _episode_case(row, config, scenario, f"{row['run_id']}__episode{int(row['episode'])}")
     case["description"] = f"{failure_class}, {case['description']}"
     case["expected"] = {
         "outcome": str(row["outcome"]),
@@ -109,13 +119,13 @@ def _case(row: pd.Series, config: Any, classifier: PluginSpec | None) -> dict[st
     return _in_order(case)
 
 
-def _violation_case(row: pd.Series, config: Any) -> dict[str, Any]:
+def _violation_case(row: pd.Series, config: Any, scenario: dict[str, Any]) -> dict[str, Any]:
     """The contents of the case file of one requirement's violation, the requirement's formula
     inlined."""
     requirement = str(row["requirement"])
     expected = f"{requirement}/{row['signals']}"
     case = _episode_case(
-        row, config, f"{row['run_id']}__episode{int(row['episode'])}__{requirement}"
+        row, config, scenario, f"{row['run_id']}__episode{int(row['episode'])}__{requirement}"
     )
     case["description"] = f"violates {expected}, {case['description']}"
     time = row["time"]
@@ -148,9 +158,11 @@ def _in_order(case: dict[str, Any]) -> dict[str, Any]:
     return {key: case[key] for key in CASE_KEYS if key in case}
 
 
-def _episode_case(row: pd.Series, config: Any, name: str) -> dict[str, Any]:
-    """What every case file holds: where and against what to play the episode, and how it
-    was found."""
+def _episode_case(
+    row: pd.Series, config: Any, scenario: dict[str, Any], name: str
+) -> dict[str, Any]:
+    """What every case file holds: where (``scenario``, its map inlined) and against what to
+    play the episode, and how it was found."""
     sut: dict[str, Any] = {}
     for key in ("controller", "safety_layer"):
         spec: PluginSpec | None = getattr(config, key)
@@ -178,7 +190,7 @@ def _episode_case(row: pd.Series, config: Any, name: str) -> dict[str, Any]:
         },
         "sut": sut,
         "human": {"actions": [[float(a), float(b)] for a, b in actions]},
-        "scenario": scenario_data(config.scenario),
+        "scenario": scenario,
     }
 
 
