@@ -427,7 +427,8 @@ def _execute_and_print(config: RunConfig, out: Path, json_output: bool) -> None:
 
 
 def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
-    """``KEY=VALUE`` strings as a dict; VALUE is read as TOML, and as a string if it is none."""
+    """``KEY=VALUE`` strings as a dict; VALUE is read as TOML, and as a string if it is none
+    (a VALUE that opens a list, a table or a quoted string must be TOML)."""
     params: dict[str, Any] = {}
     for assignment in assignments or []:
         key, separator, value = assignment.partition("=")
@@ -437,7 +438,13 @@ def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
             params[key.strip()] = loads_toml(f"value = {value}")["value"]
         except TomlTooDeepError as error:
             raise ConfigError(f"{option}: {key.strip()}: {error}") from None
-        except TOMLDecodeError:
+        except TOMLDecodeError as error:
+            if value.strip().startswith(("[", "{", '"', "'")):
+                # Its position would count the "value = " that VALUE is read under.
+                problem = re.sub(r" \(at [^)]*\)$", "", str(error))
+                raise ConfigError(
+                    f"{option}: {key.strip()}: {value} does not read as TOML ({problem})"
+                ) from None
             params[key.strip()] = value
     return params
 

@@ -122,6 +122,10 @@ def test_a_runs_cpu_time_counts_the_processes_it_started_once_they_end():
         ({"episodes": 0}, "episodes: must be greater than 0"),
         ({"tester-param": "n_envs"}, "'n_envs' is not KEY=VALUE"),
         (
+            {"tester": "cem", "tester-param": 'space={kind="aim"'},
+            'space: {kind="aim" does not read as TOML (Unclosed inline table)',
+        ),
+        (
             {"tester": "ppo-max", "tester-param": "n_env=2"},
             "tester_params.n_env: unknown parameter",
         ),
