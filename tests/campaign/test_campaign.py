@@ -527,6 +527,11 @@ def test_a_campaign_resumed_after_a_scenario_file_changed_plays_its_runs_again(
     assert f"it was played on {mine} before the file changed); running it again" in result.stdout
     again = json.loads((run / "scenario.json").read_text())["human"]["start"]
     assert again["x"] == played["x"] - 1
+    # Sent elsewhere without its scenario file, the campaign reports and copies all the same.
+    mine.unlink()
+    for command in (("report", out), ("copy", out, "--out", tmp_path / "copy")):
+        done = hazardhunt(*command)
+        assert done.returncode == 0, done.stderr
 
 
 def test_an_out_under_a_file_is_one_line(campaign_file: Path, tmp_path: Path) -> None:
@@ -680,6 +685,20 @@ def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted
     assert {(row["run_id"], row["scenario"]) for row in rows if row["run_id"] == run_id} == {
         (run_id, "head-on")
     }
+
+
+def test_a_campaign_json_that_does_not_read_is_one_line_for_report_and_export(
+    reference: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "campaign"
+    shutil.copytree(reference, out)
+    stored = json.loads((out / "campaign.json").read_text())
+    (out / "campaign.json").write_text(json.dumps(stored | {"episodes": "many"}))
+    for command in (("report", out), ("export", out, "--out", tmp_path / "cases")):
+        done = hazardhunt(*command)
+        assert done.returncode == 2
+        [line] = done.stderr.strip().splitlines()
+        assert f"{out / 'campaign.json'}: not a campaign configuration: episodes: must be" in line
 
 
 def test_run_refuses_to_write_into_a_campaign_s_run_folder(reference: Path) -> None:

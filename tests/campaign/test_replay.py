@@ -349,7 +349,7 @@ def test_a_run_replays_and_exports_the_scenario_it_played_after_its_file_changed
     done = hazardhunt("replay", directory, "--episode", episode)
     assert done.returncode == 0, done.stderr
     assert "reproduced" in done.stdout
-    assert f"{mine}: has changed since the run; replayed on the scenario the run" in done.stderr
+    assert f"{mine}: has changed or gone since the run; replayed on the scenario" in done.stderr
     cases = export_cases(directory, tmp_path / "cases")
     assert cases
     for case in cases:
@@ -363,3 +363,9 @@ def test_a_run_replays_and_exports_the_scenario_it_played_after_its_file_changed
     assert again.returncode == 0, again.stderr
     assert f"played on {mine} before the file changed; running it again" in again.stderr
     assert json.loads((directory / "scenario.json").read_text())["human"]["start"]["x"] == 4.0
+    # Sent elsewhere without its scenario file, the run replays, reports and exports all the same.
+    mine.unlink()
+    [episode, *_] = pd.read_parquet(directory / "failures.parquet")["episode"]
+    assert replay_failure(directory, int(episode)).matches
+    assert hazardhunt("report", directory).returncode == 0
+    assert export_cases(directory, tmp_path / "cases elsewhere")

@@ -18,7 +18,7 @@ from matplotlib.ticker import MaxNLocator
 from hazardhunt.env.rendering import draw_floor
 from hazardhunt.spec.descriptors import MEASURE_RANGES
 from hazardhunt.testers.registry import colour_of, sort_testers
-from hazardhunt.world.scenario import load_scenario
+from hazardhunt.world.scenario import Scenario, load_scenario
 
 FIELD_ORDER = ("none", "1.25m", "2m")
 
@@ -114,11 +114,11 @@ def learning_curves_figure(curves: pd.DataFrame, path: Path) -> Path:
     return _save(figure, path)
 
 
-def failure_heat_map(failures: pd.DataFrame, scenario: str, path: Path) -> Path:
+def failure_heat_map(failures: pd.DataFrame, scenario: str | Scenario, path: Path) -> Path:
     """Where on the floor the human was at contact, one panel per tester, counted on a 0.5 m
-    grid over the floor of ``scenario``."""
+    grid over the floor of ``scenario`` (a name or file, or the scenario itself)."""
     testers = sort_testers(failures["tester"]) or ["(none)"]
-    floor_scenario = load_scenario(scenario)
+    floor_scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     floor = floor_scenario.floor
     edges_x = np.arange(0.0, floor.width + 0.5, 0.5)
     edges_y = np.arange(0.0, floor.height + 0.5, 0.5)

@@ -58,7 +58,7 @@ from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.sut.route import scenario_route
-from hazardhunt.world.scenario import load_scenario
+from hazardhunt.world.scenario import Scenario, load_scenario
 
 RUN_COLUMNS = (
     "run_id",
@@ -490,9 +490,20 @@ def _learning_and_places(report: _Report, results: Results) -> None:
     for scenario in sorted(results.runs["scenario"].unique()):
         chosen = failures[failures["scenario"] == scenario]
         name = file_name(f"heat_map_{scenario}")
-        scenario_file = report.scenario_files[scenario]
-        path = figures.failure_heat_map(chosen, scenario_file, report.figures / f"{name}.png")
+        played = _played_scenario(results, scenario, report.scenario_files[scenario])
+        path = figures.failure_heat_map(chosen, played, report.figures / f"{name}.png")
         report.image(places, path, f"Failures on the floor: {scenario}")
+
+
+def _played_scenario(results: Results, shown: str, scenario: str) -> Scenario:
+    """The scenario shown as ``shown`` (``scenario``, a built-in name or file), as its first
+    run recorded playing it, else as its file says now."""
+    runs = results.runs[results.runs["scenario"] == shown]
+    for run_id in runs["run_id"]:
+        recorded = recorded_scenario(results.run_directory(str(run_id)))
+        if recorded is not None:
+            return recorded
+    return load_scenario(scenario)
 
 
 def _representatives(report: _Report, results: Results) -> None:

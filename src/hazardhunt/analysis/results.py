@@ -11,7 +11,7 @@ from typing import Any
 import pandas as pd
 from pydantic import ValidationError
 
-from hazardhunt.campaign.config import CampaignConfig
+from hazardhunt.campaign.config import RECORDED, CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
@@ -219,9 +219,14 @@ def _finished_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, st
 
 
 def _campaign_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, str]]:
-    config = CampaignConfig.model_validate(_read_json(directory / "campaign.json"))
+    stored = directory / "campaign.json"
+    try:  # what ran is read from the runs' files, its scenarios too: their files are not needed
+        config = CampaignConfig.model_validate(_read_json(stored), context=RECORDED)
+    except ValidationError as error:
+        problem = format_validation_error(error)
+        raise ResultsError(f"{stored}: not a campaign configuration: {problem}") from None
     complete, unfinished, damaged = [], [], {}
-    for run in config.runs():
+    for run in config.runs(RECORDED):
         path = directory / "runs" / run.run_id
         if not is_finished(path):
             unfinished.append(run.run_id)

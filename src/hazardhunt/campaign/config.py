@@ -230,8 +230,8 @@ def route_problem(name: str, robot: RobotParams) -> str | None:
     return _route_version_problem(name, _scenario_version(name), robot)
 
 
-def _check_scenario(value: str) -> str:
-    if value in BUILTIN_SCENARIOS:
+def _check_scenario(value: str, info: ValidationInfo) -> str:
+    if value in BUILTIN_SCENARIOS or _recorded(info):
         return value
     if not value.endswith(".toml"):
         raise ValueError(
@@ -263,7 +263,7 @@ def _check_fields(scenario: str, fields: list[str]) -> None:
 def scenario_field(cls: type, value: str, info: ValidationInfo) -> str:
     """A configuration's validator of its ``field``: built in or defined by its ``scenario``
     (``_field_ok = field_validator("field")(scenario_field)``)."""
-    if "scenario" in info.data:
+    if "scenario" in info.data and not _recorded(info):
         _check_fields(info.data["scenario"], [value])
     return value
 
@@ -379,7 +379,7 @@ class RunConfig(_Strict):
                 except ValueError as error:
                     raise invalid(("tester",), str(error), self.tester) from None
             _check_tester_params(self.tester, self.tester_params, self.env, ("tester_params",))
-        problem = route_problem(self.scenario, self.env.robot)
+        problem = None if _recorded(info) else route_problem(self.scenario, self.env.robot)
         if problem is not None:
             raise invalid(("scenario",), problem, self.scenario)
         return self
@@ -431,7 +431,7 @@ class CampaignConfig(_Strict):
     @field_validator("fields")
     @classmethod
     def _fields_ok(cls, values: list[str], info: ValidationInfo) -> list[str]:
-        for scenario in info.data.get("scenarios", []):
+        for scenario in [] if _recorded(info) else info.data.get("scenarios", []):
             _check_fields(scenario, values)
         return values
 
@@ -464,7 +464,7 @@ class CampaignConfig(_Strict):
         return values
 
     @model_validator(mode="after")
-    def _runs_as_configured(self) -> CampaignConfig:
+    def _runs_as_configured(self, info: ValidationInfo) -> CampaignConfig:
         _check_built_in_controller(self.env, self.controller)
         for index, name in enumerate(self.testers):
             if name not in self.tester_plugins and "method" not in self.tester.get(name, {}):
@@ -475,7 +475,7 @@ class CampaignConfig(_Strict):
         for name in dict.fromkeys([*self.tester, *self.testers]):
             if name not in self.tester_plugins:
                 _check_tester_params(name, self.tester.get(name, {}), self.env, ("tester", name))
-        for index, scenario in enumerate(self.scenarios):
+        for index, scenario in enumerate([] if _recorded(info) else self.scenarios):
             problem = route_problem(scenario, self.env.robot)
             if problem is not None:
                 raise invalid(("scenarios", index), problem, scenario)
@@ -507,24 +507,28 @@ class CampaignConfig(_Strict):
                     second,
                 )
 
-    def runs(self) -> list[RunConfig]:
-        """The runs of the grid, in a stable order."""
+    def runs(self, context: dict[str, Any] | None = None) -> list[RunConfig]:
+        """The runs of the grid, in a stable order, checked in ``context`` (:data:`RECORDED`
+        for a stored campaign whose runs recorded their scenarios)."""
         return [
-            RunConfig(
-                scenario=scenario,
-                field=field,
-                tester_plugin=self.tester_plugins.get(tester),
-                tester=tester,
-                seed=seed,
-                episodes=self.episodes,
-                env=self.env,
-                tester_params=self.tester.get(tester, {}),
-                controller=self.controller,
-                safety_layer=self.safety_layer,
-                classifier=self.classifier,
-                sut_error_limit=self.sut_error_limit,
-                requirements=self.requirements,
-                search_on=self.search_on,
+            RunConfig.model_validate(
+                {
+                    "scenario": scenario,
+                    "field": field,
+                    "tester_plugin": self.tester_plugins.get(tester),
+                    "tester": tester,
+                    "seed": seed,
+                    "episodes": self.episodes,
+                    "env": self.env,
+                    "tester_params": self.tester.get(tester, {}),
+                    "controller": self.controller,
+                    "safety_layer": self.safety_layer,
+                    "classifier": self.classifier,
+                    "sut_error_limit": self.sut_error_limit,
+                    "requirements": self.requirements,
+                    "search_on": self.search_on,
+                },
+                context=context,
             )
             for scenario in self.scenarios
             for field in self.fields
@@ -539,8 +543,19 @@ ran, whose requirement files need not be where they were (the run's violations c
 formulas)."""
 
 
+RECORDED = {**STORED, "scenario_recorded": True}
+"""The validation context of a stored run configuration whose run recorded the scenario it
+played (``scenario.json``), and of a stored campaign configuration (which says what ran, each
+run its scenario): scenario files are not read, as they may have changed or gone (results
+someone sent, a project folder moved)."""
+
+
 def _stored(info: ValidationInfo) -> bool:
     return isinstance(info.context, dict) and bool(info.context.get("stored"))
+
+
+def _recorded(info: ValidationInfo) -> bool:
+    return isinstance(info.context, dict) and bool(info.context.get("scenario_recorded"))
 
 
 def _check_search_on(
@@ -680,9 +695,10 @@ def read_stored_campaign(path: Path) -> CampaignConfig | None:
     """The campaign configuration a results directory keeps in ``path`` (its
     ``campaign.json``), or None if that file cannot be read as one. It is read through the
     model, so a file written by an earlier version, which lacks the settings added since,
-    takes their defaults and compares equal to the same campaign written today."""
+    takes their defaults and compares equal to the same campaign written today; its scenario
+    files are not read (:data:`RECORDED`)."""
     try:
-        return CampaignConfig.model_validate_json(path.read_bytes())
+        return CampaignConfig.model_validate_json(path.read_bytes(), context=RECORDED)
     except (OSError, ValidationError):
         return None
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from hazardhunt.campaign.config import (
+    RECORDED,
     ConfigError,
     first_difference,
     read_stored_campaign,
@@ -93,7 +94,7 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
         raise ConfigError(f"{destination}: exists and holds something else than this campaign")
     (destination / "runs").mkdir(parents=True, exist_ok=True)
     copied = Copied()
-    for run in config.runs():
+    for run in config.runs(RECORDED):  # what ran: its scenario files are not needed
         path = source / "runs" / run.run_id
         if not is_finished(path):
             copied.unfinished.append(run.run_id)

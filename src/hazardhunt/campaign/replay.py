@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from hazardhunt.campaign.config import STORED, RunConfig
+from hazardhunt.campaign.config import RECORDED, STORED, RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
 from hazardhunt.campaign.run import is_finished, simulation_of
 from hazardhunt.campaign.scenario_record import (
@@ -107,7 +107,9 @@ def load_run_config(run_directory: Path) -> RunConfig:
     if not isinstance(stored, dict) or not isinstance(stored.get("run"), dict):
         raise ReplayError(f"{config_path}: not a run's configuration (no run table)")
     try:
-        return RunConfig.model_validate(stored["run"], context=STORED)
+        # A run that recorded its scenario replays on that, whatever its file says now.
+        recorded = (run_directory / SCENARIO_FILE).is_file()
+        return RunConfig.model_validate(stored["run"], context=RECORDED if recorded else STORED)
     except ValidationError as error:
         problem = format_validation_error(error)
         raise ReplayError(f"{config_path}: not a run's configuration: run.{problem}") from None
@@ -286,8 +288,8 @@ def replay_failure(
     scenario = recorded_scenario(run_directory)
     if announce is not None and scenario_changed(config.scenario, run_directory):
         announce(
-            f"{config.scenario}: has changed since the run; replayed on the scenario the run "
-            f"recorded ({run_directory / SCENARIO_FILE})"
+            f"{config.scenario}: has changed or gone since the run; replayed on the scenario "
+            f"the run recorded ({run_directory / SCENARIO_FILE})"
         )
     simulation, result = replay_actions(config, row["actions"], formulas, where, scenario)
     return ReplayResult(

@@ -1,7 +1,9 @@
 """The scenario a run played, recorded with it: ``scenario.json`` in the run directory, the
 scenario file's contents with its map inlined. Replays, exported cases and the report's
-pictures use it, so that a scenario file edited after the run changes none of them; a run or
-campaign resumed after such an edit plays the runs made on the old file again."""
+pictures use it, so that a scenario file edited, moved or gone after the run changes none of
+them (the run's stored configuration is read without the file:
+:data:`~hazardhunt.campaign.config.RECORDED`); a run or campaign resumed after an edit plays
+the runs made on the old file again."""
 
 from __future__ import annotations
 
