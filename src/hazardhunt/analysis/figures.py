@@ -140,7 +140,8 @@ def failure_heat_map(failures: pd.DataFrame, scenario: str | Scenario, path: Pat
             edges_x, edges_y, masked, cmap="inferno_r", vmin=0, vmax=most, zorder=3
         )
         figure.colorbar(mesh, ax=ax, shrink=0.7, label="failures per 0.5 m cell")
-        ax.set_title(f"{tester}: {int(counts[tester].sum())} failures")
+        found = int(counts[tester].sum())
+        ax.set_title(f"{tester}: {found} failure{'' if found == 1 else 's'}")
     return _save(figure, path)
 
 
