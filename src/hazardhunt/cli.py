@@ -148,14 +148,14 @@ def _simulate_and_draw(
 ) -> tuple[str, ...]:
     """One episode of scenario ``name`` with a random human, drawn into ``out``: its row of
     the ``scenarios`` command's table."""
-    from hazardhunt.campaign.config import route_problem
+    from hazardhunt.campaign.config import cached_scenario, route_problem
     from hazardhunt.env.rendering import plot_episode
     from hazardhunt.sim.simulation import Simulation
     from hazardhunt.sut.safety_layer import field_shape
     from hazardhunt.world.bodies import RobotParams
-    from hazardhunt.world.scenario import ScenarioError, load_scenario
+    from hazardhunt.world.scenario import ScenarioError
 
-    scenario = load_scenario(name)
+    scenario = cached_scenario(name)  # read once, here and for the route's check
     problem = route_problem(name, RobotParams())
     if problem is not None:
         raise ScenarioError(problem)

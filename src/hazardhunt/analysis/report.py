@@ -45,7 +45,7 @@ from hazardhunt.campaign.replay import (
     names_sut_plugins,
     replay_actions,
 )
-from hazardhunt.campaign.scenario_record import recorded_scenario
+from hazardhunt.campaign.scenario_record import played_scenario, recorded_scenario
 from hazardhunt.campaign.store import (
     REQUIREMENT_COLUMN,
     left_out,
@@ -58,7 +58,7 @@ from hazardhunt.sim.simulation import Simulation
 from hazardhunt.spec.failure_classes import FailureClassifier
 from hazardhunt.spec.reward_hacking import LoiteringRule
 from hazardhunt.sut.route import scenario_route
-from hazardhunt.world.scenario import Scenario, load_scenario
+from hazardhunt.world.scenario import Scenario
 
 RUN_COLUMNS = (
     "run_id",
@@ -497,13 +497,9 @@ def _learning_and_places(report: _Report, results: Results) -> None:
 
 def _played_scenario(results: Results, shown: str, scenario: str) -> Scenario:
     """The scenario shown as ``shown`` (``scenario``, a built-in name or file), as its first
-    run recorded playing it, else as its file says now."""
-    runs = results.runs[results.runs["scenario"] == shown]
-    for run_id in runs["run_id"]:
-        recorded = recorded_scenario(results.run_directory(str(run_id)))
-        if recorded is not None:
-            return recorded
-    return load_scenario(scenario)
+    run played it."""
+    run_id = results.runs.loc[results.runs["scenario"] == shown, "run_id"].iloc[0]
+    return played_scenario(results.run_directory(str(run_id)), scenario)
 
 
 def _representatives(report: _Report, results: Results) -> None:
@@ -548,7 +544,7 @@ def _failure_pictures(
     if "trajectories" in left_out(directory):
         return "not drawn: a copy without trajectories (hazardhunt replay draws it)"
     config = load_run_config(directory)
-    scenario = recorded_scenario(directory) or load_scenario(config.scenario)
+    scenario = played_scenario(directory, config.scenario)
     robot = config.env.robot
     recorded = RecordedEpisode(
         scenario,

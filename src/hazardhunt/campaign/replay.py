@@ -83,9 +83,14 @@ def not_finished(directory: Path) -> str:
         stored = json.loads((directory / "config.json").read_text())
     except (OSError, UnicodeDecodeError, ValueError):
         stored = None
-    if isinstance(stored, dict) and "estimator" in stored and "run" not in stored:
+    if _is_estimate(stored):
         return f"{directory}: an estimate, not a run; 'hazardhunt report {directory}' shows it"
     return f"{directory}: the run has not finished (no summary.json)"
+
+
+def _is_estimate(stored: Any) -> bool:
+    """Whether the contents of a ``config.json`` are an estimate's configuration."""
+    return isinstance(stored, dict) and "estimator" in stored and "run" not in stored
 
 
 def load_run_config(run_directory: Path) -> RunConfig:
@@ -102,7 +107,7 @@ def load_run_config(run_directory: Path) -> RunConfig:
         stored = json.loads(config_path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as error:
         raise ReplayError(f"{config_path}: cannot be read as JSON: {error}") from None
-    if isinstance(stored, dict) and "estimator" in stored and "run" not in stored:
+    if _is_estimate(stored):
         raise ReplayError(not_finished(run_directory))
     if not isinstance(stored, dict) or not isinstance(stored.get("run"), dict):
         raise ReplayError(f"{config_path}: not a run's configuration (no run table)")

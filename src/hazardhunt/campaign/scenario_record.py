@@ -11,7 +11,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from hazardhunt.world.scenario import Scenario, ScenarioError, scenario_data, scenario_from_data
+from hazardhunt.world.scenario import (
+    Scenario,
+    ScenarioError,
+    load_scenario,
+    scenario_data,
+    scenario_from_data,
+)
 
 SCENARIO_FILE = "scenario.json"
 """The file of a run directory that holds the scenario the run played."""
@@ -47,6 +53,30 @@ def recorded_scenario(run_directory: Path) -> Scenario | None:
     if data is None:
         return None
     return scenario_from_data(data, str(run_directory / SCENARIO_FILE))
+
+
+def played_scenario(run_directory: Path, scenario: str) -> Scenario:
+    """The scenario the run in ``run_directory`` played: as it recorded it, else (a run of a
+    version that did not record it) ``scenario``, its built-in name or file, as it is now.
+
+    Raises:
+        ScenarioError: The recorded scenario, or else the file, does not load.
+    """
+    return recorded_scenario(run_directory) or load_scenario(scenario)
+
+
+def played_scenario_data(run_directory: Path, scenario: str) -> dict[str, Any]:
+    """:func:`played_scenario`'s contents, its map inlined (what a regression case holds),
+    the recorded ones checked to read as a scenario first.
+
+    Raises:
+        ScenarioError: The recorded scenario, or else the file, does not load.
+    """
+    data = recorded_scenario_data(run_directory)
+    if data is None:
+        return scenario_data(scenario)
+    scenario_from_data(data, str(run_directory / SCENARIO_FILE))
+    return data
 
 
 def scenario_changed(scenario: str, run_directory: Path) -> bool:

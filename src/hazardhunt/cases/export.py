@@ -16,9 +16,8 @@ from hazardhunt.analysis.tables import representatives
 from hazardhunt.campaign.config import check_output_location, file_name
 from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
-from hazardhunt.campaign.scenario_record import recorded_scenario, recorded_scenario_data
+from hazardhunt.campaign.scenario_record import played_scenario_data
 from hazardhunt.cases.regression import CASE_FORMAT, CaseError
-from hazardhunt.world.scenario import scenario_data
 
 
 def export_cases(
@@ -72,10 +71,7 @@ def export_cases(
             directory = results.run_directory(run_id)
             config = load_run_config(directory)
             # The scenario the run played, which its file may no longer say.
-            scenario = None
-            if recorded_scenario(directory) is not None:  # it reads as a scenario
-                scenario = recorded_scenario_data(directory)
-            configs[run_id] = (config, scenario or scenario_data(config.scenario))
+            configs[run_id] = (config, played_scenario_data(directory, config.scenario))
         return configs[run_id]
 
     for _, row in chosen.sort_values(["run_id", "episode"]).iterrows():
