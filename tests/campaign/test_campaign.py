@@ -524,7 +524,11 @@ def test_a_campaign_resumed_after_a_scenario_file_changed_plays_its_runs_again(
     mine.write_text(text.replace(f"x = {played['x']:.1f}", f"x = {played['x'] - 1:.1f}"))
     result = hazardhunt("campaign", file, "--out", out)
     assert result.returncode == 0, result.stderr
-    assert f"it was played on {mine} before the file changed); running it again" in result.stdout
+    assert (
+        f"run mine__2m__random__seed0 was played on {mine} before the file changed; running it "
+        "again" in " ".join(result.stdout.split())
+    )
+    assert "damaged" not in result.stdout
     again = json.loads((run / "scenario.json").read_text())["human"]["start"]
     assert again["x"] == played["x"] - 1
     # Sent elsewhere without its scenario file, the campaign reports and copies all the same.

@@ -129,7 +129,7 @@ def run_campaign(
         for leftover in runs_directory.glob(".*.partial"):
             shutil.rmtree(leftover)
         ledger = Ledger(config, runs, out)
-        _redo_damaged(ledger, runs_directory, console)
+        _redo(ledger, runs_directory, console)
         _warn_of_other_versions(ledger, console)
         pending = [run for run in selected if ledger.status(run) != "complete"]
         if pending:
@@ -179,14 +179,13 @@ def selected_runs(runs: list[RunConfig], only: Sequence[str]) -> list[RunConfig]
     return [run for run in runs if any(fnmatch.fnmatchcase(run.run_id, p) for p in only)]
 
 
-def _redo_damaged(ledger: Ledger, runs_directory: Path, console: Console | None) -> None:
-    """Remove the run folders that are damaged, of another configuration or unfinished, so that
-    they are run again."""
-    for run_id, damage in ledger.damaged.items():
+def _redo(ledger: Ledger, runs_directory: Path, console: Console | None) -> None:
+    """Remove the run folders that are damaged, of another configuration, unfinished or played
+    on a scenario file that changed since, so that they are run again."""
+    for run_id, why in ledger.redo.items():
         if console is not None:
             console.print(
-                f"[yellow]warning:[/yellow] run {escape(run_id)} is damaged ({escape(damage)}); "
-                "running it again"
+                f"[yellow]warning:[/yellow] run {escape(run_id)} {escape(why)}; running it again"
             )
         shutil.rmtree(runs_directory / run_id)
 

@@ -48,29 +48,31 @@ class Ledger:
     Complete runs are read back from their own directories, so the ledger of a resumed campaign
     is right even if the previous campaign process died between a run and its ledger update. A
     run folder whose files do not match their checksums, that holds a run of another
-    configuration (another command wrote it) or no ``summary.json`` is ``damaged``: the campaign
-    names it and runs it again, and never counts it.
+    configuration (another command wrote it) or no ``summary.json`` is damaged, and one played on
+    a scenario file that has changed since is out of date: the campaign names it (``redo``) and
+    runs it again, and never counts it.
     """
 
     def __init__(self, config: CampaignConfig, runs: list[RunConfig], out: Path) -> None:
         self.config = config
         self.path = out / "summary.json"
         self.entries: dict[str, LedgerEntry] = {}
-        self.damaged: dict[str, str] = {}
-        """Run id -> what is wrong with its files."""
+        self.redo: dict[str, str] = {}
+        """Run id -> why its folder is played again ("is damaged (...)", "was played on ...")."""
         self.write_error: OSError | None = None
         """Why the last write of ``summary.json`` failed; None once one succeeded."""
         for run in runs:
             directory = out / "runs" / run.run_id
             if is_finished(directory):
-                damage = find_damage(directory) or _not_this_run(directory, run)
-                if damage is None:
+                damage = find_damage(directory)
+                why = f"is damaged ({damage})" if damage else _not_this_run(directory, run)
+                if why is None:
                     stored = json.loads((directory / "summary.json").read_text())
                     self.entries[run.run_id] = _ledger_entry(stored, "complete")
                     continue
-                self.damaged[run.run_id] = damage
+                self.redo[run.run_id] = why
             elif directory.exists():  # the campaign's own folder, without its summary.json
-                self.damaged[run.run_id] = "it holds no summary.json (an unfinished run)"
+                self.redo[run.run_id] = "is damaged (it holds no summary.json (an unfinished run))"
             self.entries[run.run_id] = _run_keys(run, "pending")
         self.write()
 
@@ -118,16 +120,17 @@ class Ledger:
 
 
 def _not_this_run(directory: Path, run: RunConfig) -> str | None:
-    """Why the finished run in ``directory`` is not ``run`` (another configuration), if it is
-    not."""
+    """Why the finished run in ``directory`` is not ``run`` (another configuration, or played on
+    its scenario file before the file changed), if it is not."""
     try:
         stored = load_run_config(directory)
     except ReplayError:
-        return "its config.json does not read as a run's configuration"
+        return "is damaged (its config.json does not read as a run's configuration)"
     if stored != run:
-        return f"it holds a run of another configuration ({first_difference(stored, run)})"
+        difference = first_difference(stored, run)
+        return f"is damaged (it holds a run of another configuration ({difference}))"
     if scenario_changed(run.scenario, directory):
-        return f"it was played on {run.scenario} before the file changed"
+        return f"was played on {run.scenario} before the file changed"
     return None
 
 
