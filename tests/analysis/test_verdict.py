@@ -93,3 +93,22 @@ def test_the_regression_commands_export_then_regress_the_cases():
     )
     assert commands[1] == "hazardhunt regress results/demo/cases --controller os:system"
     assert not any("--trust-plugins" in command for command in commands)
+
+
+def test_a_verdict_of_no_failure_does_not_read_as_a_pass():
+    from hazardhunt.analysis.report import _headline
+
+    nothing = verdict.Verdict(
+        runs=1,
+        episodes=300,
+        failures=0,
+        classes=(),
+        unclassified=0,
+        clusters=None,
+        rate_bound=0.0122,
+    )
+    said = str(_headline(nothing))
+    assert "<strong>No unsafe failure</strong> in 300 episodes of 1 run" in said
+    assert "not a proof of safety" in said
+    assert "below 0.012 per tested episode" in said
+    assert "hazardhunt estimate" in said

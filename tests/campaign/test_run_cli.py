@@ -93,6 +93,16 @@ def test_a_run_that_found_failures_names_their_classes_and_how_to_see_them(tmp_p
     assert said in done.stdout
 
 
+def test_a_run_that_found_no_failure_does_not_read_as_a_pass(tmp_path):
+    out = tmp_path / "run"
+    done = hazardhunt("run", *run_args(out))
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "summary.json").read_text())["failures"] == 0
+    said = " ".join(done.stdout.split())
+    assert "no unsafe failure found in 4 episodes: none in this budget, not a proof" in said
+    assert "failure classes found" not in said
+
+
 def test_a_run_in_a_log_file_writes_lines_not_a_cut_off_bar(tmp_path, monkeypatch):
     monkeypatch.setattr(run_module, "LOG_INTERVAL_S", 0.0)
     log = io.StringIO()

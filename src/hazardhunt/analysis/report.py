@@ -721,9 +721,13 @@ def _headline(findings: verdict.Verdict) -> Markup:
         if findings.sut_errors >= findings.episodes:
             return Markup(f"<strong>Nothing was tested</strong> {played}.{untested}")
         return Markup(
-            f"<strong>No unsafe failure</strong> {played}: the failure rate is below "
-            f"{findings.rate_bound:.2g} per tested episode (95 % confidence, "
-            f"Clopper-Pearson).{untested}"
+            f"<strong>No unsafe failure</strong> {played}: none in this budget, not a proof of "
+            "safety. Among the episodes these testers chose the failure rate is below "
+            f"{findings.rate_bound:.2g} per tested episode (95 % confidence, Clopper-Pearson); "
+            "how likely a failure is with real people is another question "
+            "(<code>hazardhunt estimate</code>, docs/risk.md), and failures a search has to aim "
+            "for can take it thousands of episodes, behind a protective field above all "
+            f"(docs/search-methods.md).{untested}"
         )
     classes = len(findings.classes)
     text = (
