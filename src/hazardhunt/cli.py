@@ -1010,14 +1010,14 @@ def _validated(build: Callable[[], T]) -> T:
 def _print_classes_found(summary: RunSummary, out: Path) -> None:
     """The failure classes a run found, its first failure and how to look at them; or, when
     it found none, that this is no proof of safety."""
+    from hazardhunt.analysis.verdict import NOT_A_PASS, SLOW_TO_FIND
+
     first = summary.get("first_failure_episode")
     tested = summary["episodes"] - summary["sut_errors"]
     if not summary["failures"] and tested > 0:
         console.print(
-            f"no unsafe failure found in {tested:,} episodes: none in this budget, not a proof "
-            "of safety. Failures a search has to aim for can take it thousands of episodes, "
-            'behind a protective field above all (docs/search-methods.md, "A fifth held-out '
-            'set"); run longer, or other testers, before taking that for safe.',
+            f"no unsafe failure found in {tested:,} episodes: {NOT_A_PASS}; {SLOW_TO_FIND}; run "
+            "longer, or other testers, before taking that for safe.",
             highlight=False,
         )
     if not summary["failures"] or first is None:

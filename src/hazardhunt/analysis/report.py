@@ -721,13 +721,12 @@ def _headline(findings: verdict.Verdict) -> Markup:
         if findings.sut_errors >= findings.episodes:
             return Markup(f"<strong>Nothing was tested</strong> {played}.{untested}")
         return Markup(
-            f"<strong>No unsafe failure</strong> {played}: none in this budget, not a proof of "
-            "safety. Among the episodes these testers chose the failure rate is below "
+            f"<strong>No unsafe failure</strong> {played}: {verdict.NOT_A_PASS}. Among the "
+            "episodes these testers chose the failure rate is below "
             f"{findings.rate_bound:.2g} per tested episode (95 % confidence, Clopper-Pearson); "
             "how likely a failure is with real people is another question "
-            "(<code>hazardhunt estimate</code>, docs/risk.md), and failures a search has to aim "
-            "for can take it thousands of episodes, behind a protective field above all "
-            f"(docs/search-methods.md).{untested}"
+            "(<code>hazardhunt estimate</code>, docs/risk.md), and "
+            f"{escape(verdict.SLOW_TO_FIND)}.{untested}"
         )
     classes = len(findings.classes)
     text = (

@@ -20,6 +20,15 @@ WORST_RULE = (
 )
 """How the report picks the worst failure, as it tells the reader."""
 
+NOT_A_PASS = "none in this budget, not a proof of safety"
+"""What finding no unsafe failure means, as a run's summary and the report's verdict say it."""
+
+SLOW_TO_FIND = (
+    "failures a search has to aim for can take it thousands of episodes, behind a protective "
+    'field above all (docs/search-methods.md, "A fifth held-out set")'
+)
+"""Why a search may have found none yet, as both say it."""
+
 
 @dataclass(frozen=True)
 class Verdict:
