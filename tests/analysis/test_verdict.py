@@ -96,7 +96,7 @@ def test_the_regression_commands_export_then_regress_the_cases():
 
 
 def test_a_verdict_of_no_failure_does_not_read_as_a_pass():
-    from hazardhunt.analysis.report import _headline
+    from hazardhunt.analysis.report import verdict_headline
 
     nothing = verdict.Verdict(
         runs=1,
@@ -107,7 +107,7 @@ def test_a_verdict_of_no_failure_does_not_read_as_a_pass():
         clusters=None,
         rate_bound=0.0122,
     )
-    said = str(_headline(nothing))
+    said = str(verdict_headline(nothing))
     assert "<strong>No unsafe failure</strong> in 300 episodes of 1 run" in said
     assert "not a proof of safety" in said
     assert "below 0.012 per tested episode" in said

@@ -674,7 +674,7 @@ def _verdict(report: _Report, results: Results) -> None:
     report.findings = findings
     section = Section("Verdict")
     report.opening = section
-    section.blocks.append(Prose(_headline(findings), "headline"))
+    section.blocks.append(Prose(verdict_headline(findings), "headline"))
     worst = verdict.worst_failure(results.failures)
     if worst is not None:
         section.blocks.append(Heading("The worst failure"))
@@ -704,7 +704,7 @@ def _verdict(report: _Report, results: Results) -> None:
     _incomplete_runs(section, results)
 
 
-def _headline(findings: verdict.Verdict) -> Markup:
+def verdict_headline(findings: verdict.Verdict) -> Markup:
     """The verdict in one sentence or two, numbers in bold (the only text in it, the class
     names, escaped)."""
     played = f"in {findings.episodes} episodes of {findings.runs} run{_s(findings.runs)}"

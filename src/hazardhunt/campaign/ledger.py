@@ -15,7 +15,7 @@ from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_differen
 from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary, campaign_totals
 from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.scenario_record import scenario_changed
+from hazardhunt.campaign.scenario_record import played_before_change
 from hazardhunt.campaign.store import find_damage, write_json_atomic
 
 
@@ -129,8 +129,8 @@ def _not_this_run(directory: Path, run: RunConfig) -> str | None:
     if stored != run:
         difference = first_difference(stored, run)
         return f"is damaged (it holds a run of another configuration ({difference}))"
-    if scenario_changed(run.scenario, directory):
-        return f"was played on {run.scenario} before the file changed"
+    if (why := played_before_change(run.scenario, directory)) is not None:
+        return f"was {why}"
     return None
 
 

@@ -45,7 +45,7 @@ from hazardhunt.campaign.plugins import (
     make_safety_layer,
 )
 from hazardhunt.campaign.records import RunSummary, cpu_seconds
-from hazardhunt.campaign.scenario_record import SCENARIO_FILE, scenario_changed
+from hazardhunt.campaign.scenario_record import SCENARIO_FILE, played_before_change
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.env.agv import AGVEnv
@@ -412,9 +412,9 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
             f"{out}: holds a finished run of another configuration "
             f"({first_difference(found, config)}); choose another --out"
         )
-    why = None if damage is None else f"damaged ({damage})"
-    if why is None and scenario_changed(config.scenario, out):
-        why = f"played on {config.scenario} before the file changed"
+    why = (
+        f"damaged ({damage})" if damage is not None else played_before_change(config.scenario, out)
+    )
     if why is not None:
         if console is not None:
             console.print(f"{out}: {why}; running it again")

@@ -93,3 +93,12 @@ def scenario_changed(scenario: str, run_directory: Path) -> bool:
         return bool(scenario_data(scenario) != recorded)
     except ScenarioError:
         return True
+
+
+def played_before_change(scenario: str, run_directory: Path) -> str | None:
+    """Why the run in ``run_directory`` must be played again because ``scenario`` changed
+    (:func:`scenario_changed`), in the words a run and a campaign both say it; None if it
+    need not."""
+    if scenario_changed(scenario, run_directory):
+        return f"played on {scenario} before the file changed"
+    return None
