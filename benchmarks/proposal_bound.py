@@ -31,6 +31,7 @@ import sys
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -38,7 +39,39 @@ import pandas as pd
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.estimators import EstimatorParams
 from hazardhunt.likelihood.proposal import Proposal
-from hazardhunt.likelihood.run import encounters_of, load_config
+from hazardhunt.likelihood.run import (
+    EstimateConfig,
+    encounters_of,
+    load_config,
+    played_batches,
+)
+
+
+def monte_carlo_table(
+    parser: argparse.ArgumentParser, directory: Path
+) -> tuple[EstimateConfig, pd.DataFrame]:
+    """The configuration of the plain Monte Carlo estimate in ``directory`` and its episodes
+    that tested something (no SUT error); a usage error through ``parser`` for an estimate of
+    another method."""
+    config = load_config(directory)
+    if config.estimator.method != "mc":
+        parser.error(f"{directory}: a {config.estimator.method} estimate, not plain Monte Carlo")
+    table = pd.concat(played_batches(directory))
+    return config, table[~table["sut_error"]]
+
+
+def result_header(note: str, config: EstimateConfig, table: pd.DataFrame) -> dict[str, Any]:
+    """What a bound's result file opens with: how it was made, and the estimate it read."""
+    return {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "note": note,
+        "date": datetime.now(UTC).isoformat(),
+        "scenario": config.scenario,
+        "field": config.field,
+        "episodes": len(table),
+        "failures": int(table["failure"].sum()),
+        "probability": float(table["failure"].mean()),
+    }
 
 
 def efficiency(weights: list[float], p: float) -> float:
@@ -85,15 +118,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path)
     parser.add_argument("--note", default="", help="Recorded with the result.")
     args = parser.parse_args()
-    config = load_config(args.estimate)
-    if config.estimator.method != "mc":
-        parser.error(
-            f"{args.estimate}: a {config.estimator.method} estimate, not plain Monte Carlo"
-        )
-    table = pd.concat(
-        pd.read_parquet(path) for path in sorted((args.estimate / "batches").glob("*.parquet"))
-    )
-    table = table[~table["sut_error"]]
+    config, table = monte_carlo_table(parser, args.estimate)
     dims = encounters_of(config).dimensions
     failures = [
         {dim.name: float(row[f"x.{dim.name}"]) for dim in dims}
@@ -136,14 +161,7 @@ def main() -> None:
             )
     if args.out:
         result = {
-            "command": " ".join([Path(sys.executable).name, *sys.argv]),
-            "note": args.note,
-            "date": datetime.now(UTC).isoformat(),
-            "scenario": config.scenario,
-            "field": config.field,
-            "episodes": len(table),
-            "failures": len(failures),
-            "probability": p,
+            **result_header(args.note, config, table),
             "failure_classes": table.loc[table["failure"], "failure_class"].tolist(),
             "defensive": defaults.defensive,
             "fits": rows,
