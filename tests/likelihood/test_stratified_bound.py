@@ -1,6 +1,7 @@
 """benchmarks/stratified_bound.py: what stratifying on a discrete variable can gain at most."""
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,11 @@ def load():
     assert spec is not None
     assert spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    path = list(sys.path)
+    try:
+        spec.loader.exec_module(module)  # puts benchmarks/ on the path for proposal_bound
+    finally:
+        sys.path[:] = path
     return module
 
 
