@@ -12,11 +12,13 @@ variable:
 
 - the efficiency over plain Monte Carlo of plain Monte Carlo in every stratum with Neyman's
   allocation (the strata's rates known beforehand, which an estimate would have to learn);
-- for each stratum, how much more efficient than plain Monte Carlo the sampler inside it would
-  have to be, the others plain Monte Carlo, for the whole to need ``--ratio`` times fewer
-  episodes than plain Monte Carlo at ``--relative-error`` (``impossible``: not even a sampler
-  of no variance there would do: the other strata's own plain Monte Carlo takes more; a
-  stratum without a failure has nothing to gain).
+- for each stratum, the episodes plain Monte Carlo inside it needs for its share of the error
+  alone (the whole at ``--relative-error``, the other strata exact), and how much more efficient
+  than plain Monte Carlo the sampler inside it would have to be, the others plain Monte Carlo,
+  for the whole to need ``--ratio`` times fewer episodes than plain Monte Carlo at
+  ``--relative-error`` (``impossible``: not even a sampler of no variance there would do: the
+  other strata's own plain Monte Carlo takes more; a stratum without a failure has nothing to
+  gain).
 
 The rates come from the failures Monte Carlo saw: a stratum with one failure has a rate known
 to within a factor of several, and so has everything computed from it.
@@ -79,7 +81,13 @@ def bound(rows: list[dict[str, Any]], p: float, error: float, ratio: float) -> d
             need = "impossible: the other strata's plain Monte Carlo alone takes more"
         else:
             need = costs[i] / room**2
-        needed.append({"value": row["value"], "efficiency_needed": need})
+        needed.append(
+            {
+                "value": row["value"],
+                "efficiency_needed": need,
+                "episodes_for_its_share": costs[i] / variance,
+            }
+        )
     return {
         "monte_carlo_episodes": monte_carlo,
         "episodes_allowed": allowed,
@@ -124,8 +132,9 @@ def main() -> None:
             said = wanted if isinstance(wanted, str) else f"{wanted:.1f}x"
             print(
                 f"  {name} = {row['value']:g}: probability {row['probability']:.3g}, "
-                f"{row['failures']} failures in {row['episodes']} episodes; a sampler inside "
-                f"it for {args.ratio:g}x: {said}"
+                f"{row['failures']} failures in {row['episodes']} episodes; plain Monte Carlo "
+                f"inside it needs {need['episodes_for_its_share']:.0f} episodes for its share "
+                f"of the error alone; a sampler inside it for {args.ratio:g}x: {said}"
             )
     if args.out:
         result = {

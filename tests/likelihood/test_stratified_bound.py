@@ -42,6 +42,10 @@ def test_a_rare_stratum_that_fails_caps_what_the_other_can_gain():
     need = {row["value"]: row["efficiency_needed"] for row in found["needed"]}
     assert need[0.0] == pytest.approx(51, abs=1)
     assert need[1.0] > 300
+    # The one failure among the nine tenths alone takes most of a tenth of Monte Carlo's budget.
+    alone = {row["value"]: row["episodes_for_its_share"] for row in found["needed"]}
+    assert alone[1.0] == pytest.approx(1_389, abs=1)
+    assert alone[1.0] < found["episodes_allowed"]
 
 
 def test_without_a_failure_among_the_many_the_strata_alone_reach_tenfold():

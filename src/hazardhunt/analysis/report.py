@@ -721,8 +721,8 @@ def verdict_headline(findings: verdict.Verdict) -> Markup:
         if findings.sut_errors >= findings.episodes:
             return Markup(f"<strong>Nothing was tested</strong> {played}.{untested}")
         return Markup(
-            f"<strong>No unsafe failure</strong> {played}: {verdict.NOT_A_PASS}. Among the "
-            "episodes these testers chose the failure rate is below "
+            f"<strong>No unsafe failure</strong> {played}: {escape(verdict.NOT_A_PASS)}. "
+            "Among the episodes these testers chose the failure rate is below "
             f"{findings.rate_bound:.2g} per tested episode (95 % confidence, Clopper-Pearson); "
             "how likely a failure is with real people is another question "
             "(<code>hazardhunt estimate</code>, docs/risk.md), and "
