@@ -215,3 +215,20 @@ def test_from_the_first_failure_on_coming_closer_counts_for_nothing(approaches):
     with_gain, without = values(0.1), values(0.0)
     assert with_gain[0] != without[0]  # the gains for coming closer counted
     assert with_gain[1] == without[1]  # and were forgotten at the failure, to the last bit
+
+
+@pytest.mark.parametrize("gains", [{}, {"class_gain": 0.5, "repeat_gain": 0.0}])
+def test_what_a_new_class_and_a_repeat_earn_an_arm_are_settings(approaches, gains):
+    sim, stand, _, _, failure = approaches
+    params = PortfolioParams(arms=uniform_arms("first", "again", "after"), floor=0.0, **gains)
+    sampler = PortfolioSampler(params, SearchContext(sim, seed=0))
+    sampler.tell(sampler.ask(), [failure, stand])  # a class no arm had found
+    sampler.tell(sampler.ask(), [failure, stand])  # the same failure again: a repeat
+    sampler.tell(sampler.ask(), [stand, stand])
+    first, again, _ = sampler.arms
+    assert first.weighted_gain == pytest.approx(params.class_gain * params.discount**2)
+    assert again.weighted_gain == pytest.approx(params.repeat_gain * params.discount)
+    # Paid nothing for its repeat, the second arm is worth no more than the one that found
+    # nothing, but for the bonus of arms tried less.
+    if not params.repeat_gain:
+        assert again.value(6.0, 0.0) == 0.0

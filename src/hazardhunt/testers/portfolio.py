@@ -28,12 +28,13 @@ How the budget moves:
 
 - first every arm takes its first look, back to back in the arms' order: one batch per decision
   space it searches in turn (the plain attacks of ``cem-mixed`` among them);
-- an episode's gain is 1 for a failure of a class no arm has found before (the built-in
-  taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`), 0.3 for one in a
-  new cell of the failure descriptors (sector of the robot, safety-layer history, human moving
-  or standing), and 0.03 for any other failure; until the run's first failure, ``closer_gain``
-  for an episode that came closer to one than every episode before it (the objective's score),
-  gains forgotten at the first failure;
+- an episode's gain is ``class_gain`` = 1 for a failure of a class no arm has found before
+  (the built-in taxonomy, :class:`~hazardhunt.spec.failure_classes.MechanismClassifier`),
+  ``cell_gain`` = 0.3 for one in a new cell of the failure descriptors (sector of the robot,
+  safety-layer history, human moving or standing), and ``repeat_gain`` = 0.03 for any other
+  failure; until the run's first failure, ``closer_gain`` = 0.1 for an episode that came closer
+  to one than every episode before it (the objective's score), gains forgotten at the first
+  failure;
 - each arm's value is its gain per episode, discounted so that what it found lately counts
   most, plus a bonus for arms tried less (discounted UCB; Garivier and Moulines 2011), and the
   next batch goes to the arm of highest value;
@@ -92,12 +93,6 @@ from hazardhunt.testers.search import (
 )
 from hazardhunt.testers.spaces import SearchSpace
 
-NEW_CLASS_GAIN = 1.0
-"""An episode's gain for a failure of a class no arm has found."""
-NEW_CELL_GAIN = 0.3
-"""An episode's gain for a failure in a descriptor cell no arm has filled."""
-FAILURE_GAIN = 0.03
-"""An episode's gain for any other failure."""
 METHODS: dict[str, type[SearchParams]] = {
     "mirror": MirrorParams,
     "boundary": BoundaryParams,
@@ -185,6 +180,13 @@ class PortfolioParams(SearchParams):
     """Weight of an arm's earlier batches against its latest, per batch the portfolio plays."""
     optimism: float = Field(default=0.02, ge=0.0, allow_inf_nan=False)
     """Scale of the bonus for arms tried less (in gain per episode)."""
+    class_gain: float = Field(default=1.0, ge=0.0, le=1.0, allow_inf_nan=False)
+    """An episode's gain for a failure of a class no arm has found."""
+    cell_gain: float = Field(default=0.3, ge=0.0, le=1.0, allow_inf_nan=False)
+    """An episode's gain for a failure in a descriptor cell no arm has filled (the larger of
+    the two when it is of a new class too)."""
+    repeat_gain: float = Field(default=0.03, ge=0.0, le=1.0, allow_inf_nan=False)
+    """An episode's gain for any other failure."""
     closer_gain: float = Field(default=0.1, ge=0.0, le=1.0, allow_inf_nan=False)
     """Before the run's first failure, an episode's gain for coming closer to one (the search
     objective's score: the largest risk, or the requirement's robustness) than every episode
@@ -347,7 +349,7 @@ class PortfolioSampler:
         if not self.objective.hit(result):
             return 0.0
         state.failures += 1
-        gain = FAILURE_GAIN
+        gain = self.params.repeat_gain
         failure_class = (
             self.classifier.classify(result.trajectory or (), summary, self.field)
             if isinstance(self.objective, ContactRule)
@@ -356,11 +358,11 @@ class PortfolioSampler:
         if failure_class not in self.classes_found:
             self.classes_found.add(failure_class)
             state.classes[failure_class] = episode
-            gain = NEW_CLASS_GAIN
+            gain = self.params.class_gain
         cell = failure_cell(summary, self.classifier.moving_speed)
         if cell not in self.cells_found:
             self.cells_found.add(cell)
-            gain = max(gain, NEW_CELL_GAIN)
+            gain = max(gain, self.params.cell_gain)
         return gain
 
     def _closer(self, results: list[EpisodeResult]) -> int:
