@@ -268,6 +268,48 @@ def test_reporting_and_exporting_a_received_campaign_imports_nothing(
     assert "marker_sut" not in sys.modules
 
 
+def test_no_command_builds_the_tester_a_received_run_names(run_with_failures, tmp_path):
+    # A portfolio's arm of one's own is an import path in the run's tester settings.
+    here = tmp_path / "here"
+    here.mkdir()
+    marker = tmp_path / "imported"
+    arm = {"name": "theirs", "method": marker_module(here, marker)}
+    run = received_copy(
+        run_with_failures, tmp_path, tester="portfolio", tester_params={"arms": [arm]}
+    )
+    episode = int(pd.read_parquet(run / "failures.parquet")["episode"][0])
+    replay = hazardhunt("replay", run, "--episode", episode, cwd=here)
+    assert replay.returncode == 0, replay.stderr
+    assert "reproduced" in replay.stdout
+    assert hazardhunt("report", run, cwd=here).returncode == 0
+    assert hazardhunt("export", run, "--out", here / "cases", cwd=here).returncode == 0
+    again = hazardhunt(
+        "run", "--out", run, "--scenario", "overtaking", "--field", "none", "--tester",
+        "random", "--episodes", 20, cwd=here,
+    )  # fmt: skip
+    assert again.returncode == 2
+    assert "holds a finished run of another configuration (tester: there 'portfolio'" in (
+        again.stderr
+    )
+    # The same settings in a received campaign's record.
+    config = CampaignConfig(
+        scenarios=["overtaking"], fields=["none"], testers=["portfolio"], seeds=[0], episodes=20
+    )
+    campaign = tmp_path / "campaign"
+    (campaign / "runs").mkdir(parents=True)
+    stored = {**config.model_dump(mode="json"), "tester": {"portfolio": {"arms": [arm]}}}
+    (campaign / "campaign.json").write_text(json.dumps(stored))
+    shutil.copytree(run, campaign / "runs" / config.runs()[0].run_id)
+    for command in (
+        ["report"],
+        ["export", "--out", here / "cases-2"],
+        ["copy", "--out", here / "c"],
+    ):
+        done = hazardhunt(command[0], campaign, *command[1:], cwd=here)
+        assert done.returncode == 0, (command, done.stderr)
+    assert not marker.exists()
+
+
 def test_replay_imports_a_stored_plug_in_when_allowed_and_says_which(run_with_failures, tmp_path):
     marker = tmp_path / "imported"
     controller = marker_module(tmp_path, marker)

@@ -378,7 +378,8 @@ class RunConfig(_Strict):
                     _check_tester(self.tester)
                 except ValueError as error:
                     raise invalid(("tester",), str(error), self.tester) from None
-            _check_tester_params(self.tester, self.tester_params, self.env, ("tester_params",))
+            if not _stored(info):  # building it would import a portfolio's arms of one's own
+                _check_tester_params(self.tester, self.tester_params, self.env, ("tester_params",))
         problem = None if _recorded(info) else route_problem(self.scenario, self.env.robot)
         if problem is not None:
             raise invalid(("scenario",), problem, self.scenario)
@@ -472,8 +473,8 @@ class CampaignConfig(_Strict):
                     _check_tester(name)
                 except ValueError as error:
                     raise invalid(("testers", index), str(error), name) from None
-        for name in dict.fromkeys([*self.tester, *self.testers]):
-            if name not in self.tester_plugins:
+        for name in dict.fromkeys([] if _stored(info) else [*self.tester, *self.testers]):
+            if name not in self.tester_plugins:  # built, as a stored campaign's are not
                 _check_tester_params(name, self.tester.get(name, {}), self.env, ("tester", name))
         for index, scenario in enumerate([] if _recorded(info) else self.scenarios):
             problem = route_problem(scenario, self.env.robot)
@@ -540,7 +541,8 @@ class CampaignConfig(_Strict):
 STORED = {"stored": True}
 """The validation context of a configuration read back from a run directory: a record of what
 ran, whose requirement files need not be where they were (the run's violations carry their
-formulas)."""
+formulas), and whose testers are not built to check their settings (a portfolio's arm of
+one's own would be imported: results are data, never code)."""
 
 
 RECORDED = {**STORED, "scenario_recorded": True}

@@ -35,7 +35,7 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import ConfigError, EnvOptions, RunConfig, first_difference
+from hazardhunt.campaign.config import STORED, ConfigError, EnvOptions, RunConfig, first_difference
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.plugins import (
     PluginSpec,
@@ -402,19 +402,18 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
     damage = find_damage(out)
     try:
         stored = json.loads((out / "config.json").read_text())["run"]
-    except (OSError, ValueError, KeyError, TypeError):
+        found = RunConfig.model_validate(stored, context=STORED)
+    except (OSError, ValueError, KeyError, TypeError):  # a ValidationError is a ValueError
         raise ConfigError(
-            f"{out}: holds a damaged run ({damage or 'config.json cannot be read'}); "
+            f"{out}: holds a damaged run ({damage or 'config.json does not read as a run'}); "
             "delete it or choose another --out"
         ) from None
-    if (found := RunConfig.model_validate(stored)) != config:
+    if found != config:
         raise ConfigError(
             f"{out}: holds a finished run of another configuration "
             f"({first_difference(found, config)}); choose another --out"
         )
-    why = (
-        f"damaged ({damage})" if damage is not None else played_before_change(config.scenario, out)
-    )
+    why = f"damaged ({damage})" if damage else played_before_change(config.scenario, out)
     if why is not None:
         if console is not None:
             console.print(f"{out}: {why}; running it again")
@@ -430,7 +429,7 @@ def _written_by(out: Path, config: RunConfig) -> bool:
     """Whether ``out`` holds the files of a run of ``config`` (its ``config.json`` says so)."""
     try:
         stored = json.loads((out / "config.json").read_text())["run"]
-        return RunConfig.model_validate(stored) == config
+        return RunConfig.model_validate(stored, context=STORED) == config
     except (OSError, ValueError, KeyError, TypeError):
         return False
 
