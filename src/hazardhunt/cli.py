@@ -757,6 +757,13 @@ def regress(
     ] = None,
     classifier: RegressClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
+    controller_timeout: Annotated[
+        float | None,
+        typer.Option(
+            help="Wall-clock limit on each call of the controller and of the safety layer, in "
+            "s, instead of the case's; a call that exceeds it makes the case's verdict error."
+        ),
+    ] = None,
     trust_plugins: TrustPluginsOption = False,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print the results as JSON on stdout.")
@@ -771,11 +778,14 @@ def regress(
     with 3 when some case could not be tested at all (the SUT raised, hung or returned something
     unusable: verdict "error").
     """
+    from hazardhunt.campaign.config import EnvOptions
     from hazardhunt.cases import VERDICTS, case_files, regress_case
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
     classifier_spec = _plugin("--classifier", classifier, classifier_param)
+    if controller_timeout is not None:  # checked as a run checks it, before any case runs
+        _validated(lambda: EnvOptions(controller_timeout=controller_timeout))
     files = case_files(cases)
     announce = _announcer()
     results = []
@@ -791,6 +801,7 @@ def regress(
                     classifier=classifier_spec,
                     trust_plugins=trust_plugins,
                     announce=announce,
+                    controller_timeout=controller_timeout,
                 )
             )
             progress.advance(task)

@@ -251,6 +251,30 @@ def test_a_controller_that_raises_instead_leaves_every_case_untested(cases, tmp_
     assert "the SUT erred and the case tested nothing" in shown.stderr
 
 
+def test_a_controller_that_hangs_is_an_error_within_the_limit_given(cases, tmp_path):
+    (tmp_path / "hanging.py").write_text(
+        "import time\n"
+        "class Hanging:\n"
+        "    control_period = 0.2\n"
+        "    def reset(self, floor, route, robot, params):\n"
+        "        pass\n"
+        "    def control(self, time_s, robot, human):\n"
+        "        time.sleep(30)\n"
+    )
+    case = sorted(cases.glob("*.toml"))[0]
+    done = hazardhunt(
+        "regress", case, "--json", "--controller", "hanging:Hanging", "--controller-timeout",
+        0.5, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 3, done.stderr
+    [result] = json.loads(done.stdout)["cases"]
+    assert result["verdict"] == "error"
+    assert "0.5 s" in result["error"]
+    refused = hazardhunt("regress", case, "--controller-timeout", 0, cwd=tmp_path)
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == "error: controller_timeout: must be greater than 0"
+
+
 def case_file(folder: Path, controller: dict[str, object], name: str = "received") -> Path:
     """A valid case on the crossing whose SUT's controller is ``controller``."""
     from hazardhunt.world.scenario import scenario_data

@@ -195,8 +195,10 @@ def regress_case(
     classifier: PluginSpec | None = None,
     trust_plugins: bool = False,
     announce: Callable[[str], None] | None = None,
+    controller_timeout: float | None = None,
 ) -> RegressionResult:
-    """Re-run one case, against the given plug-ins and field setting instead of the case's.
+    """Re-run one case, against the given plug-ins, field setting and wall-clock limit on each
+    call of the SUT (``controller_timeout``, in s) instead of the case's.
 
     Nothing the case file names is imported from it. Its controller and safety layer (when it
     names plug-ins) are imported only when given again (the same import path confirms the
@@ -224,10 +226,7 @@ def regress_case(
         scenario = scenario_from_data(case.scenario, f"{path} [scenario]")
     except ScenarioError as error:
         raise CaseError(str(error)) from None
-    try:
-        options = case.environment.options()
-    except ValidationError as error:
-        raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
+    options = _options(path, case, controller_timeout)
     controller = _allowed(path, case.sut, "controller", controller, trust_plugins, announce)
     safety_layer = _allowed(path, case.sut, "safety_layer", safety_layer, trust_plugins, announce)
     try:
@@ -261,6 +260,21 @@ def regress_case(
         first = result.verdicts[case.requirement.name].time  # the violation's first instant
         at = at if first is None else first
     return RegressionResult(path.name, expected, outcome, failure_class, at, verdict, sut_error)
+
+
+def _options(path: Path, case: _Case, controller_timeout: float | None) -> EnvOptions:
+    """The case's environment options, with ``controller_timeout`` instead of its own if given.
+
+    Raises:
+        CaseError: An option of the case is out of range.
+    """
+    try:
+        options = case.environment.options()
+    except ValidationError as error:
+        raise CaseError(f"{path}: environment.{format_validation_error(error)}") from None
+    if controller_timeout is None:
+        return options
+    return options.model_copy(update={"controller_timeout": controller_timeout})
 
 
 def _class_of(
