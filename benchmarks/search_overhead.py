@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 from hazardhunt.campaign.config import PluginSpec, RunConfig
-from hazardhunt.campaign.run import simulation_of
+from hazardhunt.campaign.simulations import simulation_of
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecorder

@@ -317,6 +317,13 @@ TESTER_MODULE = """
 
         def save(self, directory):
             pass
+
+    class Stumbles(Charge):
+        \"\"\"Raises in the middle of its episodes.\"\"\"
+
+        def explore(self, env, episodes):
+            env.evaluate(self.action)
+            raise KeyError("no such aisle")
 """
 
 CLASSIFIER_MODULE = """
@@ -426,6 +433,20 @@ def test_a_bad_tester_plug_in_is_one_clear_line_and_runs_nothing(tmp_path, optio
     [line] = done.stderr.strip().splitlines()
     assert line.startswith("error: tester: ")
     assert message in line
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_tester_plug_in_that_raises_is_one_line_naming_where_and_keeps_nothing(tmp_path):
+    module = plugin_module(tmp_path, TESTER_MODULE, "my_testers")
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--episodes", 3,
+        "--out", tmp_path / "run", "--tester", "my_testers:Stumbles", cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 1
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith("error: run crossing__none__my_testers_Stumbles__seed0: tester ")
+    assert "'my_testers:Stumbles' raised KeyError: 'no such aisle'" in line
+    assert f"({module}, line " in line
     assert not (tmp_path / "run").exists()
 
 

@@ -11,7 +11,7 @@ from stable_baselines3 import PPO
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.replay import replay_failure
-from hazardhunt.campaign.run import simulation_of
+from hazardhunt.campaign.simulations import simulation_of
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecorder

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from hazardhunt.campaign.config import RunConfig
-from hazardhunt.campaign.run import simulation_of
+from hazardhunt.campaign.simulations import simulation_of
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.testers import EpisodeRecord, make_tester
 from hazardhunt.testers.base import EpisodeRecorder

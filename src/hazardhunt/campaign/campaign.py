@@ -54,7 +54,8 @@ from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.progress import ProgressDisplay, print_campaign_table
 from hazardhunt.campaign.ray_executor import execute_on_ray
 from hazardhunt.campaign.records import CampaignSummary
-from hazardhunt.campaign.run import check_sut, is_complete, make_directory
+from hazardhunt.campaign.run import is_complete, make_directory
+from hazardhunt.campaign.simulations import check_sut
 from hazardhunt.campaign.store import write_json_atomic
 from hazardhunt.errors import HazardhuntError
 

@@ -22,12 +22,13 @@ from pydantic import ValidationError
 
 from hazardhunt.campaign.config import RECORDED, STORED, RunConfig
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin
-from hazardhunt.campaign.run import is_finished, simulation_of
+from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.scenario_record import (
     SCENARIO_FILE,
     recorded_scenario,
     scenario_changed,
 )
+from hazardhunt.campaign.simulations import simulation_of
 from hazardhunt.campaign.store import find_damage
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation

@@ -18,7 +18,8 @@ import json
 import platform
 import shutil
 import time
-from collections.abc import Callable, Sequence
+import traceback
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -35,29 +36,21 @@ from rich.progress import (
 )
 
 import hazardhunt
-from hazardhunt.campaign.config import STORED, ConfigError, EnvOptions, RunConfig, first_difference
+from hazardhunt.campaign.config import STORED, ConfigError, RunConfig, first_difference
 from hazardhunt.campaign.lock import exclusive_lock
-from hazardhunt.campaign.plugins import (
-    PluginSpec,
-    make_classifier,
-    make_controller,
-    make_plugin_tester,
-    make_safety_layer,
-)
+from hazardhunt.campaign.plugins import make_classifier, make_plugin_tester
 from hazardhunt.campaign.records import RunSummary, cpu_seconds
 from hazardhunt.campaign.scenario_record import SCENARIO_FILE, played_before_change
+from hazardhunt.campaign.simulations import check_sut, simulation_of
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
-from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.env.agv import AGVEnv
 from hazardhunt.errors import HazardhuntError
-from hazardhunt.sim.simulation import PeriodError, Simulation
 from hazardhunt.spec.failure_classes import OTHER
-from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
 from hazardhunt.testers.objective import objective_of
-from hazardhunt.world.scenario import Scenario, scenario_data
+from hazardhunt.world.scenario import scenario_data
 
 
 @dataclass(frozen=True)
@@ -74,67 +67,6 @@ class RunProgress:
 
 
 ProgressCallback = Callable[[RunProgress], None]
-
-
-def build_simulation(
-    scenario: str | Scenario,
-    field: str,
-    options: EnvOptions,
-    controller: PluginSpec | None = None,
-    safety_layer: PluginSpec | None = None,
-    requirements: Sequence[str] = (),
-) -> Simulation:
-    """The simulation a run's settings describe: the built-in SUT unless plug-ins are given,
-    judging each episode by ``requirements`` too (names of the library's or files,
-    :func:`~hazardhunt.spec.requirements.requirements_of`).
-
-    Raises:
-        PluginError: A plug-in does not load.
-        ConfigError: The periods do not fit (a decision period that is not a multiple of the
-            controller's, a controller period that is not a multiple of the physics step).
-    """
-    try:
-        simulation = Simulation.build(
-            scenario,
-            field,
-            options.settings(),
-            controller=None if controller is None else make_controller(controller),
-            safety_layer=None if safety_layer is None else make_safety_layer(safety_layer),
-        )
-    except PeriodError as error:
-        raise ConfigError(str(error)) from None
-    if requirements:
-        period = simulation.controller.control_period
-        simulation.requirements = requirements_of(list(requirements), period)
-    return simulation
-
-
-def simulation_of(config: RunConfig, scenario: Scenario | None = None) -> Simulation:
-    """The simulation of a run's configuration, on ``scenario`` if given (one a run recorded)."""
-    return build_simulation(
-        config.scenario if scenario is None else scenario,
-        config.field,
-        config.env,
-        config.controller,
-        config.safety_layer,
-        config.requirements,
-    )
-
-
-def check_sut(config: RunConfig) -> None:
-    """Exercise the run's controller and safety-layer plug-ins once on a trial episode (reset,
-    then one decision of a human standing still, against a simulation of its own), so that a
-    plug-in that cannot run stops the run before anything is written, instead of making every
-    episode a ``sut_error``. The built-in SUT is not tried.
-
-    Raises:
-        PluginError: A plug-in does not load, or raised, hung or returned something unusable
-            on the trial episode: one line naming the plug-in, the method and the error.
-        ConfigError: The periods do not fit.
-    """
-    if config.controller is None and config.safety_layer is None:
-        return
-    try_plugins(simulation_of(config), config.controller, config.safety_layer)
 
 
 def make_run_tester(config: RunConfig) -> Tester:
@@ -203,10 +135,7 @@ def record_run(
     recorder = _recorder(config, AGVEnv.wrapping(simulation, reward_of(tester)), on_episode)
     if progress is not None:
         progress(RunProgress(0, config.episodes, 0, 0.0))
-    try:
-        tester.explore(recorder, config.episodes)
-    finally:
-        recorder.close()  # the worker processes of batches played on several cores
+    _explore(config, tester, recorder)
     _check_played(config, store)
     tester.save(directory / "tester")
     store.close()
@@ -227,6 +156,27 @@ def _recorder(
     )
     recorder.objective = objective_of(config.search_on)
     return recorder
+
+
+def _explore(config: RunConfig, tester: Tester, recorder: EpisodeRecorder) -> None:
+    """The tester plays the run's episodes.
+
+    Raises:
+        RunFailed: A user's tester raised (where in its code, in one line).
+    """
+    try:
+        tester.explore(recorder, config.episodes)
+    except Exception as error:
+        if config.tester_plugin is None or isinstance(error, RunFailed):
+            raise  # a built-in tester's error is hazardhunt's, shown whole
+        frame = traceback.extract_tb(error.__traceback__)[-1]
+        raise RunFailed(
+            f"run {config.run_id}: tester {config.tester_plugin.path!r} raised "
+            f"{type(error).__name__}: {error} ({frame.filename}, line {frame.lineno}); "
+            "nothing of the run was kept"
+        ) from error
+    finally:
+        recorder.close()  # the worker processes of batches played on several cores
 
 
 def _check_played(config: RunConfig, store: RunStore) -> None:
@@ -362,7 +312,8 @@ def execute_run(config: RunConfig, out: Path, console: Console | None = None) ->
     Raises:
         ConfigError: ``out`` holds something else, or a run of another configuration, or
             another process is writing it, or it is a run folder of a campaign.
-        PluginError: A plug-in of the SUT fails on a trial episode (:func:`check_sut`).
+        PluginError: A plug-in of the SUT fails on a trial episode
+            (:func:`~hazardhunt.campaign.simulations.check_sut`).
         RunFailed: The run could not write its results, or tested nothing (``NothingTested``);
             nothing of it is left.
     """

@@ -38,7 +38,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, fiel
 
 from hazardhunt.campaign.config import EnvOptions
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
-from hazardhunt.campaign.run import build_simulation
+from hazardhunt.campaign.simulations import build_simulation
 from hazardhunt.campaign.store import sut_error_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation

@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from hazardhunt.campaign.config import EnvOptions, first_difference, scenario_field
 from hazardhunt.campaign.plugins import PluginSpec
-from hazardhunt.campaign.run import build_simulation
+from hazardhunt.campaign.simulations import build_simulation
 from hazardhunt.campaign.trial import try_plugins
 from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.likelihood.distributions import Dimension
