@@ -281,8 +281,8 @@ TesterParamOption = Annotated[
     typer.Option(
         metavar="KEY=VALUE",
         help="A tester parameter as KEY=VALUE (TOML value), e.g. workers=2 (portfolio, cem, "
-        "qd, random), space=aim (cem, qd, random) or n_envs=2 (ppo-*); repeat for "
-        "several (docs/search-methods.md).",
+        "qd), space=aim (cem, qd) or n_envs=2 (ppo-*); repeat for several "
+        "(docs/search-methods.md).",
     ),
 ]
 RobotOption = Annotated[
@@ -1150,13 +1150,13 @@ def _exit_with(message: str, code: int) -> NoReturn:
 
 
 def _interrupted() -> NoReturn:
-    resumable = len(sys.argv) > 1 and sys.argv[1] in ("run", "campaign")
-    how = (
-        ": run the same command again to resume (complete runs are kept, the rest is redone "
-        "from its start)"
-        if resumable
-        else ""
-    )
+    command = sys.argv[1] if len(sys.argv) > 1 else ""
+    how = {
+        "run": ": run the same command again to resume (complete runs are kept, the rest is "
+        "redone from its start)",
+        "estimate": ": run the same command again to resume (the batches written are kept, the "
+        "rest is played)",
+    }.get("run" if command == "campaign" else command, "")
     err_console.print(f"[yellow]interrupted[/yellow]{how}")
     raise SystemExit(INTERRUPTED) from None
 

@@ -193,6 +193,17 @@ def test_out_must_not_hold_something_else(tmp_path):
     assert done.returncode == 2
     assert "is not a finished run" in done.stderr
     assert (tmp_path / "notes.txt").read_text() == "mine"
+    # A campaign's folder (its campaign.json) is named as one, not as a damaged run.
+    (tmp_path / "campaign.json").write_text("{}")
+    (tmp_path / "summary.json").write_text("{}")
+    done = hazardhunt("run", *run_args(tmp_path))
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: {tmp_path}: holds a campaign, not a run; choose another --out"
+    )
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        "campaign.json", "notes.txt", "summary.json"
+    ]  # fmt: skip
 
 
 def test_the_scenarios_command_draws_a_scenario_file_with_a_field_it_defines(tmp_path):

@@ -343,6 +343,8 @@ def _finished_run(config: RunConfig, out: Path, console: Console | None) -> RunS
         ConfigError: ``out`` holds something else, a run of another configuration, or a damaged
             run whose configuration cannot be read.
     """
+    if (out / "campaign.json").is_file():  # not a run to redo: a whole campaign
+        raise ConfigError(f"{out}: holds a campaign, not a run; choose another --out")
     if not is_finished(out):
         if _written_by(out, config):  # a run of this configuration whose summary.json is lost
             if console is not None:
