@@ -32,7 +32,8 @@ from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
-    from hazardhunt.campaign.records import RunSummary
+    from hazardhunt.campaign.records import RequirementCount, RunSummary
+    from hazardhunt.campaign.replay import ReplayResult
     from hazardhunt.cases import RegressionResult
 
 
@@ -525,20 +526,7 @@ def replay(
         trust_plugins=trust_plugins,
         announce=_announcer(),
     )
-    verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
-    # An episode that has not ended when its recorded actions run out has no outcome.
-    replayed = replay.result.outcome or "no end (its recorded actions ran out)"
-    console.print(
-        f"episode {episode}: recorded {shown(replay.recorded_outcome)} at "
-        f"{replay.recorded_sim_time:.2f} s, replayed {replayed} at "
-        f"{replay.result.summary.sim_time:.2f} s: {verdict}"
-    )
-    for name, robustness in replay.recorded_robustness.items():
-        again = replay.result.verdicts.get(name)
-        console.print(
-            f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
-            f"{'none' if again is None else f'{again.robustness:.6g}'}"
-        )
+    _print_replay(replay)
     if gif is not None:
         from hazardhunt.env.rendering import animate_episode
 
@@ -546,6 +534,27 @@ def replay(
         console.print(f"animation written to [bold]{gif}[/bold]")
     if not replay.matches:
         raise typer.Exit(1)
+
+
+def _print_replay(replay: ReplayResult) -> None:
+    """What the record says, what the replay did, and whether that reproduces it (never when
+    the SUT erred in the replay: it tested nothing)."""
+    verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
+    if replay.sut_error is not None:
+        verdict += f": the SUT erred, so the replay tested nothing ({shown(replay.sut_error)})"
+    # An episode that has not ended when its recorded actions run out has no outcome.
+    replayed = replay.result.outcome or "no end (its recorded actions ran out)"
+    console.print(
+        f"episode {replay.episode}: recorded {shown(replay.recorded_outcome)} at "
+        f"{replay.recorded_sim_time:.2f} s, replayed {replayed} at "
+        f"{replay.result.summary.sim_time:.2f} s: {verdict}"
+    )
+    for name, robustness in replay.recorded_robustness.items():
+        again = replay.result.verdicts.get(name)
+        console.print(
+            f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
+            f"{'not judged' if again is None else f'{again.robustness:.6g}'}"
+        )
 
 
 def _check_gif(gif: Path | None) -> None:
@@ -1065,18 +1074,7 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
         )
     faulty = summary.get("first_classifier_error")
     for name, count in (summary.get("requirements") or {}).items():
-        violated_first = count["first_violation_episode"]
-        said = (
-            f"requirement {shown(name)}: {count['violations']:,} episodes violated it"
-            + ("" if violated_first is None else f", the first episode {violated_first}")
-            + f"; lowest robustness {count['min_robustness']:.3g}"
-        )
-        decided = count.get("decided_by") or {}
-        if decided:
-            said += "; decided by " + ", ".join(
-                f"{shown(signals)} ({n:,})" for signals, n in decided.items()
-            )
-        console.print(said, highlight=False)
+        console.print(_requirement_line(name, count, summary["episodes"]), highlight=False)
     if faulty is not None:
         console.print(
             f"[red]warning: the failure classifier failed on {summary['classifier_errors']} "
@@ -1085,6 +1083,30 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             highlight=False,
         )
     console.print(f"results in [bold]{out.resolve()}[/bold]")
+
+
+def _requirement_line(name: str, count: RequirementCount, episodes: int) -> str:
+    """How a run's episodes stood against one requirement: over the episodes it judged, which
+    leave out those that ended in a SUT error (a run before 0.2.0 judged every episode)."""
+    judged = count.get("judged")
+    if judged is None:
+        said = f"requirement {shown(name)}: {count['violations']:,} episodes violated it"
+    else:
+        said = f"requirement {shown(name)}: {count['violations']:,} of {judged:,} tested episodes "
+        said += "violated it"
+        if judged < episodes:
+            said += f" ({episodes - judged:,} ended in a SUT error and are not judged)"
+    violated_first, lowest = count["first_violation_episode"], count["min_robustness"]
+    if violated_first is not None:
+        said += f", the first episode {violated_first}"
+    if lowest is not None:
+        said += f"; lowest robustness {lowest:.3g}"
+    decided = count.get("decided_by") or {}
+    if decided:
+        said += "; decided by " + ", ".join(
+            f"{shown(signals)} ({n:,})" for signals, n in decided.items()
+        )
+    return said
 
 
 def _one_line_summaries() -> None:
