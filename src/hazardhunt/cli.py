@@ -871,9 +871,9 @@ def new_sut(
     help="Estimate the probability of a failure per encounter when people behave as a model of "
     "them says and the SUT's sensors and brake vary as a model of its uncertainties says "
     "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate; with "
-    "a larger --episodes, to add episodes to a plain Monte Carlo one. Exits "
-    "with code 1 when every episode ended in a SUT error (nothing was tested); 2 for bad input, "
-    "before anything runs.",
+    "a larger --episodes, to add episodes to a plain Monte Carlo one. The estimate is over the "
+    "episodes the SUT played: exits with code 1 when none of those it counts was (each ended "
+    "in a SUT error: nothing was tested); 2 for bad input, before anything runs.",
 )
 def estimate_command(
     out: Annotated[Path, typer.Option(help="Directory for the estimate's episodes and result.")],
@@ -964,12 +964,12 @@ def estimate_command(
 def _print_estimate(summary: dict[str, Any], path: Path) -> None:
     from hazardhunt.likelihood.results import NOTES
 
-    result = summary["probability"]
+    result, errors = summary["probability"], summary["sut_errors"]
     table = Table("failures per encounter", "95 % interval", "episodes", "failures", "method")
     table.add_row(
         f"{result['probability']:.3g}",
         f"[{result['low']:.3g}, {result['high']:.3g}] ({result['interval']})",
-        f"{summary['episodes']:,}",
+        f"{summary['episodes']:,}" + (f" [red]({errors:,} SUT errors)[/red]" if errors else ""),
         f"{result['failures']:,}",
         summary["method"],
     )
@@ -995,14 +995,32 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
     for note in NOTES:
         if summary.get(note):
             console.print(f"[yellow]note:[/yellow] {escape(summary[note])}", highlight=False)
-    if summary["sut_errors"]:
-        bound = summary["untested"]["failure_or_untested"]["high"]
-        err_console.print(
-            f"[red]warning:[/red] {summary['sut_errors']:,} episodes ended in a SUT error and "
-            "tested nothing; counting them as failures, the probability of a failure is up to "
-            f"{bound:.3g}"
-        )
+    if errors:
+        _warn_of_untested(summary)
     console.print(f"estimate: {escape(str(path))}", highlight=False)
+
+
+def _warn_of_untested(summary: dict[str, Any]) -> None:
+    """That some of an estimate's episodes ended in a SUT error: how many, the first error,
+    that the estimate is over the others, and where the probability lies whatever they would
+    have done."""
+    errors, untested = summary["sut_errors"], summary["untested"]
+    first = summary.get("first_sut_error")
+    said = (
+        f"[red]warning:[/red] {errors:,} of the {summary['episodes']:,} episodes ended in a SUT "
+        "error and tested nothing"
+        + (f" (the first: {shown(first)})" if first else "")
+        + f"; the estimate and its interval are over the {summary['probability']['episodes']:,} "
+        "tested episodes it counts"
+    )
+    low = untested["failure_and_tested"]["low"]
+    high = untested["failure_or_untested"]["high"]
+    said += (
+        f". Whatever those {errors:,} would have done, the probability of a failure lies "
+        f"between {low:.3g} (counting them as safe) and {high:.3g} (counting them as failures)"
+    )
+    err_console.print(said, highlight=False)
+    err_console.print(f"[yellow]note:[/yellow] {escape(untested['note'])}", highlight=False)
 
 
 def _validated(build: Callable[[], T]) -> T:

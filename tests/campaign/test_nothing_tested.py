@@ -52,10 +52,12 @@ class RaisesNearTheHuman(PursuitController):
 
 
 class WearsOut(PursuitController):
-    """Plays its first three episodes, then raises in every one."""
+    """Plays its first ``lasts`` episodes (a trial episode on the same object counts), then
+    raises in every one."""
 
-    def __init__(self, **options):
-        super().__init__(**options)
+    def __init__(self, lasts=3):
+        super().__init__()
+        self.lasts = lasts
         self.episodes = 0
 
     def reset(self, floor, route, robot, params):
@@ -63,7 +65,7 @@ class WearsOut(PursuitController):
         super().reset(floor, route, robot, params)
 
     def control(self, time_s, robot, human):
-        if self.episodes > 3:
+        if self.episodes > self.lasts:
             raise RuntimeError("worn out")
         return super().control(time_s, robot, human)
 
