@@ -32,7 +32,8 @@ from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 if TYPE_CHECKING:
     from hazardhunt.campaign.config import RunConfig
     from hazardhunt.campaign.plugins import PluginSpec
-    from hazardhunt.campaign.records import RunSummary
+    from hazardhunt.campaign.records import RequirementCount, RunSummary
+    from hazardhunt.campaign.replay import ReplayResult
     from hazardhunt.cases import RegressionResult
 
 
@@ -525,20 +526,7 @@ def replay(
         trust_plugins=trust_plugins,
         announce=_announcer(),
     )
-    verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
-    # An episode that has not ended when its recorded actions run out has no outcome.
-    replayed = replay.result.outcome or "no end (its recorded actions ran out)"
-    console.print(
-        f"episode {episode}: recorded {shown(replay.recorded_outcome)} at "
-        f"{replay.recorded_sim_time:.2f} s, replayed {replayed} at "
-        f"{replay.result.summary.sim_time:.2f} s: {verdict}"
-    )
-    for name, robustness in replay.recorded_robustness.items():
-        again = replay.result.verdicts.get(name)
-        console.print(
-            f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
-            f"{'none' if again is None else f'{again.robustness:.6g}'}"
-        )
+    _print_replay(replay)
     if gif is not None:
         from hazardhunt.env.rendering import animate_episode
 
@@ -546,6 +534,27 @@ def replay(
         console.print(f"animation written to [bold]{gif}[/bold]")
     if not replay.matches:
         raise typer.Exit(1)
+
+
+def _print_replay(replay: ReplayResult) -> None:
+    """What the record says, what the replay did, and whether that reproduces it (never when
+    the SUT erred in the replay: it tested nothing)."""
+    verdict = "[green]reproduced[/green]" if replay.matches else "[red]NOT reproduced[/red]"
+    if replay.sut_error is not None:
+        verdict += f": the SUT erred, so the replay tested nothing ({shown(replay.sut_error)})"
+    # An episode that has not ended when its recorded actions run out has no outcome.
+    replayed = replay.result.outcome or "no end (its recorded actions ran out)"
+    console.print(
+        f"episode {replay.episode}: recorded {shown(replay.recorded_outcome)} at "
+        f"{replay.recorded_sim_time:.2f} s, replayed {replayed} at "
+        f"{replay.result.summary.sim_time:.2f} s: {verdict}"
+    )
+    for name, robustness in replay.recorded_robustness.items():
+        again = replay.result.verdicts.get(name)
+        console.print(
+            f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
+            f"{'not judged' if again is None else f'{again.robustness:.6g}'}"
+        )
 
 
 def _check_gif(gif: Path | None) -> None:
@@ -873,9 +882,9 @@ def new_sut(
     help="Estimate the probability of a failure per encounter when people behave as a model of "
     "them says and the SUT's sensors and brake vary as a model of its uncertainties says "
     "(docs/risk.md).\n\nRun the same command again to resume an interrupted estimate; with "
-    "a larger --episodes, to add episodes to a plain Monte Carlo one. Exits "
-    "with code 1 when every episode ended in a SUT error (nothing was tested); 2 for bad input, "
-    "before anything runs.",
+    "a larger --episodes, to add episodes to a plain Monte Carlo one. The estimate is over the "
+    "episodes the SUT played: exits with code 1 when none of those it counts was (each ended "
+    "in a SUT error: nothing was tested); 2 for bad input, before anything runs.",
 )
 def estimate_command(
     out: Annotated[Path, typer.Option(help="Directory for the estimate's episodes and result.")],
@@ -966,12 +975,12 @@ def estimate_command(
 def _print_estimate(summary: dict[str, Any], path: Path) -> None:
     from hazardhunt.likelihood.results import NOTES
 
-    result = summary["probability"]
+    result, errors = summary["probability"], summary["sut_errors"]
     table = Table("failures per encounter", "95 % interval", "episodes", "failures", "method")
     table.add_row(
         f"{result['probability']:.3g}",
         f"[{result['low']:.3g}, {result['high']:.3g}] ({result['interval']})",
-        f"{summary['episodes']:,}",
+        f"{summary['episodes']:,}" + (f" [red]({errors:,} SUT errors)[/red]" if errors else ""),
         f"{result['failures']:,}",
         summary["method"],
     )
@@ -997,14 +1006,32 @@ def _print_estimate(summary: dict[str, Any], path: Path) -> None:
     for note in NOTES:
         if summary.get(note):
             console.print(f"[yellow]note:[/yellow] {escape(summary[note])}", highlight=False)
-    if summary["sut_errors"]:
-        bound = summary["untested"]["failure_or_untested"]["high"]
-        err_console.print(
-            f"[red]warning:[/red] {summary['sut_errors']:,} episodes ended in a SUT error and "
-            "tested nothing; counting them as failures, the probability of a failure is up to "
-            f"{bound:.3g}"
-        )
+    if errors:
+        _warn_of_untested(summary)
     console.print(f"estimate: {escape(str(path))}", highlight=False)
+
+
+def _warn_of_untested(summary: dict[str, Any]) -> None:
+    """That some of an estimate's episodes ended in a SUT error: how many, the first error,
+    that the estimate is over the others, and where the probability lies whatever they would
+    have done."""
+    errors, untested = summary["sut_errors"], summary["untested"]
+    first = summary.get("first_sut_error")
+    said = (
+        f"[red]warning:[/red] {errors:,} of the {summary['episodes']:,} episodes ended in a SUT "
+        "error and tested nothing"
+        + (f" (the first: {shown(first)})" if first else "")
+        + f"; the estimate and its interval are over the {summary['probability']['episodes']:,} "
+        "tested episodes it counts"
+    )
+    low = untested["failure_and_tested"]["low"]
+    high = untested["failure_or_untested"]["high"]
+    said += (
+        f". Whatever those {errors:,} would have done, the probability of a failure lies "
+        f"between {low:.3g} (counting them as safe) and {high:.3g} (counting them as failures)"
+    )
+    err_console.print(said, highlight=False)
+    err_console.print(f"[yellow]note:[/yellow] {escape(untested['note'])}", highlight=False)
 
 
 def _validated(build: Callable[[], T]) -> T:
@@ -1076,18 +1103,7 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
         )
     faulty = summary.get("first_classifier_error")
     for name, count in (summary.get("requirements") or {}).items():
-        violated_first = count["first_violation_episode"]
-        said = (
-            f"requirement {shown(name)}: {count['violations']:,} episodes violated it"
-            + ("" if violated_first is None else f", the first episode {violated_first}")
-            + f"; lowest robustness {count['min_robustness']:.3g}"
-        )
-        decided = count.get("decided_by") or {}
-        if decided:
-            said += "; decided by " + ", ".join(
-                f"{shown(signals)} ({n:,})" for signals, n in decided.items()
-            )
-        console.print(said, highlight=False)
+        console.print(_requirement_line(name, count, summary["episodes"]), highlight=False)
     if faulty is not None:
         console.print(
             f"[red]warning: the failure classifier failed on {summary['classifier_errors']} "
@@ -1096,6 +1112,30 @@ def _print_run_summary(summary: RunSummary, out: Path) -> None:
             highlight=False,
         )
     console.print(f"results in [bold]{out.resolve()}[/bold]")
+
+
+def _requirement_line(name: str, count: RequirementCount, episodes: int) -> str:
+    """How a run's episodes stood against one requirement: over the episodes it judged, which
+    leave out those that ended in a SUT error (a run before 0.2.0 judged every episode)."""
+    judged = count.get("judged")
+    if judged is None:
+        said = f"requirement {shown(name)}: {count['violations']:,} episodes violated it"
+    else:
+        said = f"requirement {shown(name)}: {count['violations']:,} of {judged:,} tested episodes "
+        said += "violated it"
+        if judged < episodes:
+            said += f" ({episodes - judged:,} ended in a SUT error and are not judged)"
+    violated_first, lowest = count["first_violation_episode"], count["min_robustness"]
+    if violated_first is not None:
+        said += f", the first episode {violated_first}"
+    if lowest is not None:
+        said += f"; lowest robustness {lowest:.3g}"
+    decided = count.get("decided_by") or {}
+    if decided:
+        said += "; decided by " + ", ".join(
+            f"{shown(signals)} ({n:,})" for signals, n in decided.items()
+        )
+    return said
 
 
 def _one_line_summaries() -> None:

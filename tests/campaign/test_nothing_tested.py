@@ -2,17 +2,20 @@
 stops the command before anything is written (exit 2); a run whose every episode ended in a
 SUT error fails (exit 1) with the first error in one line; SUT errors below that show in the
 summary, the campaign table and the report's verdict; a regression case whose SUT erred is an
-error, not fixed."""
+error, not fixed; requirements judge only the episodes the SUT played, and one it erred in has
+nothing to replay."""
 
 import json
 import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from hazardhunt.campaign.config import RunConfig
 from hazardhunt.campaign.run import NothingTested, record_run
+from hazardhunt.campaign.store import file_checksums
 from hazardhunt.sut.pursuit import PursuitController
 from tests.helpers import hazardhunt
 
@@ -46,6 +49,105 @@ class RaisesNearTheHuman(PursuitController):
         if human is not None and math.dist(human.position, (robot.x, robot.y)) < 3.0:
             raise RuntimeError("tracking overflow")
         return super().control(time_s, robot, human)
+
+
+class WearsOut(PursuitController):
+    """Plays its first ``lasts`` episodes (a trial episode on the same object counts), then
+    raises in every one."""
+
+    def __init__(self, lasts=3):
+        super().__init__()
+        self.lasts = lasts
+        self.episodes = 0
+
+    def reset(self, floor, route, robot, params):
+        self.episodes += 1
+        super().reset(floor, route, robot, params)
+
+    def control(self, time_s, robot, human):
+        if self.episodes > self.lasts:
+            raise RuntimeError("worn out")
+        return super().control(time_s, robot, human)
+
+
+REQUIREMENTS = """
+[requirements.far-away]
+formula = "always(clearance >= 50)"
+description = "Violated by every episode played: the floor is 20 m across."
+
+[requirements.anywhere]
+formula = "always(clearance >= -1)"
+description = "Kept by every episode played."
+"""
+
+
+def run_that_wears_out(tmp_path):
+    """A run of 8 episodes whose SUT (:class:`WearsOut`) erred in the last 5, judged by
+    :data:`REQUIREMENTS`: its directory and the command's output."""
+    requirements = tmp_path / "requirements.toml"
+    requirements.write_text(REQUIREMENTS)
+    run = tmp_path / "run"
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 8, "--out", run, "--controller", f"{HERE}:WearsOut",
+        "--requirement", requirements, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return run, done
+
+
+def recorded_as_before_0_2(run):
+    """Make ``run`` what versions before 0.2.0 recorded: the episodes that ended in a SUT
+    error violate the requirements their first episode violated (its files signed anew, as
+    they were then)."""
+    violations = pd.read_parquet(run / "violations.parquet")
+    erred = pd.read_parquet(run / "episodes.parquet").query("outcome == 'sut_error'")
+    first = violations[violations["episode"] == 0]
+    judged = [first.assign(episode=episode, outcome="sut_error") for episode in erred["episode"]]
+    pd.concat([violations, *judged], ignore_index=True).to_parquet(run / "violations.parquet")
+    summary = json.loads((run / "summary.json").read_text())
+    summary["checksums"] = file_checksums(run)
+    (run / "summary.json").write_text(json.dumps(summary))
+
+
+def test_requirements_judge_only_the_episodes_the_sut_played(tmp_path):
+    run, done = run_that_wears_out(tmp_path)
+    for name, violated in (("far-away", 3), ("anywhere", 0)):
+        assert (
+            f"requirement {name}: {violated} of 3 tested episodes violated it (5 ended in a SUT "
+            "error and are not judged)"
+        ) in done.stdout
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["requirements"]["far-away"]["judged"] == 3
+    violations = pd.read_parquet(run / "violations.parquet")
+    assert sorted(violations["episode"]) == [0, 1, 2]
+    assert "sut_error" not in set(violations["outcome"])
+
+    # An episode that ended in a SUT error has nothing to reproduce, in this run and in one
+    # recorded before 0.2.0, which kept its violations.
+    nothing_to_reproduce(run, 5)
+    recorded_as_before_0_2(run)
+    nothing_to_reproduce(run, 5)
+    # A violation replayed against a SUT that now errs is not reproduced, and says why.
+    replayed = hazardhunt(
+        "replay", run, "--episode", 1, "--controller", f"{HERE}:RaisesOnceTheHumanMoves", cwd=ROOT
+    )
+    assert replayed.returncode == 1
+    assert (
+        "NOT reproduced: the SUT erred, so the replay tested nothing (controller: RuntimeError: "
+        "lost the localisation)"
+    ) in replayed.stdout
+
+
+def nothing_to_reproduce(run, episode):
+    """Replaying ``episode``, which ended in a SUT error, fails, naming the error."""
+    replayed = hazardhunt(
+        "replay", run, "--episode", episode, "--controller", f"{HERE}:WearsOut", cwd=ROOT
+    )
+    assert replayed.returncode != 0
+    assert "reproduced" not in replayed.stdout
+    said = "it ended in a SUT error, which tested nothing: controller: RuntimeError: worn out"
+    assert said in replayed.stderr
 
 
 def run_command(tmp_path, controller, *options, episodes=6):

@@ -383,6 +383,21 @@ def test_text_from_a_case_file_reaches_the_terminal_as_text(cases, tmp_path):
     assert "side\\x1b[2J[red]forged[/red]" in done.stdout
 
 
+def test_episodes_the_sut_could_not_play_are_not_exported_as_cases(tmp_path):
+    from tests.campaign.test_nothing_tested import recorded_as_before_0_2, run_that_wears_out
+
+    run, _ = run_that_wears_out(tmp_path)
+    # As versions before 0.2.0 recorded it: the 5 episodes that ended in a SUT error with the
+    # violations of the first episode.
+    recorded_as_before_0_2(run)
+    done = hazardhunt("export", run, "--out", tmp_path / "cases", "--all")
+    assert done.returncode == 0, done.stderr
+    cases = [tomllib.loads(f.read_text()) for f in (tmp_path / "cases").glob("*.toml")]
+    assert f"{len(cases)} cases written" in done.stdout
+    assert {case["found"]["episode"] for case in cases} == {0, 1, 2}
+    assert all(case["expected"]["outcome"] != "sut_error" for case in cases)
+
+
 def test_a_requirements_violations_export_as_cases_that_regress_checks_against_it(tmp_path):
     mine = tmp_path / "mine.toml"
     mine.write_text('[requirements.wide-berth]\nformula = "always(clearance >= 1.5)"\n')

@@ -511,10 +511,76 @@ def test_episodes_the_sut_could_not_play_widen_the_probability_not_lower_it(tmp_
     summary = summarise(config, table, toy.threshold)
     errors = int(table["sut_error"].sum())
     assert summary["sut_errors"] == errors > 100
+    # The estimate is over the episodes the SUT played.
+    tested = table[~table["sut_error"]]
+    assert summary["probability"]["episodes"] == summary["episodes_tested"] == len(tested)
+    assert summary["probability"]["probability"] == pytest.approx(tested["failure"].mean())
     untested = summary["untested"]
     assert untested["probability"]["probability"] == pytest.approx(errors / 1000)
     # Counted as failures, the encounters the SUT could not play raise the upper end.
     assert untested["failure_or_untested"]["high"] > summary["probability"]["high"] + 0.1
+    assert untested["failure_and_tested"]["low"] < summary["probability"]["low"]
+
+
+class CrashingAtRandom(ClosedFormEncounters):
+    """A SUT that raises in about half of the encounters, whatever the encounter is (when its
+    noise seed is odd)."""
+
+    def play(self, draw):
+        if draw.seed % 2:
+            return Played("sut_error", False, None, 0.0, 0.0, 0.0, True, "RuntimeError: flaky")
+        return super().play(draw)
+
+
+def test_importance_sampling_leaves_out_the_episodes_the_sut_could_not_play(tmp_path):
+    toy = CrashingAtRandom()
+    config, table = toy_estimate(tmp_path, 0, episodes=1000, source=toy)
+    summary = summarise(config, table, toy.threshold)
+    result, untested = summary["probability"], summary["untested"]
+    assert 400 < summary["sut_errors"] < 600
+    # Over the tested episodes, the estimate covers the truth; counting the others as safe
+    # encounters, as before, halved it.
+    assert result["low"] <= toy.probability <= result["high"]
+    counted_as_safe = untested["failure_and_tested"]["probability"]
+    assert counted_as_safe == pytest.approx(result["probability"] / 2, rel=0.2)
+    assert (
+        "unbiased only if the SUT's errors have nothing to do with the encounter"
+        in (untested["note"])
+    )
+
+
+def test_an_estimate_is_over_the_episodes_the_sut_played(tmp_path):
+    def estimate_wearing_out(out, method, lasts):
+        return hazardhunt(
+            "estimate", "--scenario", "head-on", "--field", "none", "--method", method,
+            "--episodes", 100 if method == "mc" else 150, "--batch-size", 50, "--out", out,
+            "--controller", "tests.campaign.test_nothing_tested:WearsOut",
+            "--controller-param", f"lasts={lasts}", cwd=ROOT,
+        )  # fmt: skip
+
+    # 10 episodes played (the trial episode counts), 90 not: the interval is over 10.
+    done = estimate_wearing_out(tmp_path / "mc", "mc", 11)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "mc" / "estimate.json").read_text())
+    result = summary["probability"]
+    assert result["episodes"] == summary["episodes_tested"] == 10
+    assert (result["low"], result["high"]) == pytest.approx(clopper_pearson(result["failures"], 10))
+    assert f"[{result['low']:.3g}, {result['high']:.3g}] (clopper-pearson)" in done.stdout
+    assert "100 (90 SUT errors)" in done.stdout
+    assert (
+        "warning: 90 of the 100 episodes ended in a SUT error and tested nothing (the first: "
+        "controller: RuntimeError: worn out); the estimate and its interval are over the 10 "
+        "tested episodes it counts"
+    ) in done.stderr
+    # Cross-entropy counts the episodes drawn once its proposal stopped moving: the last 50,
+    # every one of which erred. Nothing it counts was tested: exit 1, nothing kept.
+    done = estimate_wearing_out(tmp_path / "ce", "ce", 51)
+    assert done.returncode == 1
+    assert (
+        "error: every one of the 50 episodes drawn from the final proposal, the ones it counts, "
+        "ended in a SUT error (the first: controller: RuntimeError: worn out): nothing was tested"
+    ) in done.stderr
+    assert not (tmp_path / "ce").exists()
 
 
 def test_too_small_a_budget_and_an_untested_sut_exit_non_zero(tmp_path):

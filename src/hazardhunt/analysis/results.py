@@ -15,7 +15,7 @@ from hazardhunt.campaign.config import RECORDED, CampaignConfig
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
-from hazardhunt.campaign.store import find_damage, left_out
+from hazardhunt.campaign.store import REQUIREMENT_COLUMN, find_damage, left_out
 from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
@@ -130,6 +130,7 @@ def load_results_of(
         name: _stacked(run_directories, summaries, f"{name}.parquet")
         for name in ("episodes", "failures", "loitering", "violations")
     }
+    _judge_tested_only(tables)
     if classifier is None:
         plugins = [
             recorded_classifier(config, path / "config.json")
@@ -263,6 +264,20 @@ def _stacked(
     if not parts:
         return pd.DataFrame(columns=list(RUN_KEYS))
     return pd.concat(parts, ignore_index=True)
+
+
+def _judge_tested_only(tables: dict[str, pd.DataFrame]) -> None:
+    """Take the requirements' verdicts on episodes that ended in a SUT error out of ``tables``
+    (their violations, their robustness): such an episode tested nothing, and is neither a
+    violation nor a pass. Runs before 0.2.0 recorded verdicts on them."""
+    episodes, violations = tables["episodes"], tables["violations"]
+    if "outcome" in violations:
+        tables["violations"] = violations[violations["outcome"] != "sut_error"].reset_index(
+            drop=True
+        )
+    judged = [c for c in episodes.columns if str(c).startswith(REQUIREMENT_COLUMN)]
+    if judged and "outcome" in episodes:
+        episodes.loc[episodes["outcome"] == "sut_error", judged] = float("nan")
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -97,14 +97,45 @@ def _table(scratch: Path, name: str, data: pd.DataFrame, caption: str = "") -> T
     return table(name, data, caption)
 
 
-def _untested(summary: dict[str, Any]) -> str:
-    """What the episodes the SUT could not play mean for the probability."""
+def _untested(summary: dict[str, Any]) -> list[Block]:
+    """What the episodes the SUT could not play mean for the probability, and what leaving
+    them out assumes."""
     untested = summary.get("untested") or {}
-    bound = (untested.get("failure_or_untested") or {}).get("high")
-    said = f"{summary['sut_errors']:,} episodes ended in a SUT error and tested nothing"
-    if isinstance(bound, float):
-        said += f"; counting them as failures, the probability of a failure is up to {bound:.3g}"
+    note = untested.get("note")
+    return [Text(_range(summary), "warning"), *([Text(note, "warning")] if note else [])]
+
+
+def _range(summary: dict[str, Any]) -> str:
+    """Where the probability of a failure lies whatever the episodes the SUT could not play
+    would have done."""
+    untested = summary.get("untested") or {}
+    low = (untested.get("failure_and_tested") or {}).get("low")
+    high = (untested.get("failure_or_untested") or {}).get("high")
+    errors = summary["sut_errors"]
+    said = f"{errors:,} episodes ended in a SUT error and tested nothing"
+    if isinstance(low, float) and isinstance(high, float):
+        said += (
+            f": the probability above is over the tested episodes. Whatever those {errors:,} "
+            f"would have done, the probability of a failure lies between {low:.3g} (counting "
+            f"them as safe) and {high:.3g} (counting them as failures)."
+        )
+        return said
+    # An estimate.json written before 0.2.0: its probability counts them as safe encounters.
+    said += (
+        "; the probability above counts them as safe encounters: run the estimate's command "
+        "again to have it over the tested episodes"
+    )
+    if isinstance(high, float):
+        said += f"; counting them as failures, the probability of a failure is up to {high:.3g}"
     return said + "."
+
+
+def _episodes(summary: dict[str, Any]) -> str:
+    """The episodes the headline is over: all of them, or, when some ended in a SUT error, the
+    tested ones it counts, of all."""
+    if not summary.get("sut_errors") or "episodes_tested" not in summary:
+        return f"{summary['episodes']:,}"
+    return f"the {summary['probability']['episodes']:,} tested of {summary['episodes']:,}"
 
 
 def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any]) -> Section:
@@ -125,7 +156,7 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
                 f"{result['high']:.3g}",
                 result["interval"],
                 f"{result['failures']:,}",
-                f"{summary['episodes']:,}",
+                _episodes(summary),
             ),
             "headline",
         )
@@ -145,7 +176,7 @@ def _probabilities(scratch: Path, config: EstimateConfig, summary: dict[str, Any
         if summary.get(note):
             section.blocks.append(Text(summary[note], "warning"))
     if summary.get("sut_errors"):
-        section.blocks.append(Text(_untested(summary), "warning"))
+        section.blocks += _untested(summary)
     rows = [
         {
             "class": name,

@@ -25,15 +25,34 @@ class FirstError(TypedDict):
     error: str
 
 
-class RequirementCount(TypedDict):
-    """How a run's episodes stood against one requirement beyond the contact rule."""
-
+class _Violations(TypedDict):
     violations: int
     first_violation_episode: int | None
-    min_robustness: float
-    """The lowest robustness of any episode (negative: the worst violation's depth)."""
+    min_robustness: float | None
+    """The lowest robustness of any episode judged (negative: the worst violation's depth);
+    None when none was."""
     decided_by: dict[str, int]
     """Violations by the signals that explain them (``clearance+robot_speed``: count)."""
+
+
+class RequirementCount(_Violations, total=False):
+    """How a run's episodes stood against one requirement beyond the contact rule."""
+
+    judged: int
+    """Episodes judged by it: those the SUT played. One that ended as ``sut_error`` tested
+    nothing and is neither a violation nor a pass (runs before 0.2.0 judged every episode and
+    did not record this)."""
+
+
+def requirement_count() -> RequirementCount:
+    """The count of a requirement no episode has been judged by yet."""
+    return {
+        "judged": 0,
+        "violations": 0,
+        "first_violation_episode": None,
+        "min_robustness": None,
+        "decided_by": {},
+    }
 
 
 class RunSummary(TypedDict, total=False):

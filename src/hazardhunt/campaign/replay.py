@@ -29,9 +29,10 @@ from hazardhunt.campaign.scenario_record import (
     scenario_changed,
 )
 from hazardhunt.campaign.simulations import simulation_of
-from hazardhunt.campaign.store import find_damage
+from hazardhunt.campaign.store import find_damage, sut_error_of
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.spec.episode import EpisodeSummary
 from hazardhunt.spec.requirements import RequirementError, StlRequirement
 from hazardhunt.textfiles import format_validation_error
 from hazardhunt.world.scenario import Scenario
@@ -61,12 +62,18 @@ class ReplayResult:
     """The robustness of each requirement the episode violated, as recorded."""
 
     @property
+    def sut_error(self) -> str | None:
+        """What ended the replay as ``sut_error`` (:func:`sut_error_of`); None if it did not."""
+        return sut_error_of(self.result.summary) if self.result.outcome == "sut_error" else None
+
+    @property
     def matches(self) -> bool:
         """Same outcome at the same simulated time, and each recorded violation again with
-        the same robustness."""
+        the same robustness; never a replay whose SUT erred, which tested nothing."""
         verdicts = self.result.verdicts
         return (
-            self.result.outcome == self.recorded_outcome
+            self.sut_error is None
+            and self.result.outcome == self.recorded_outcome
             and abs(self.result.summary.sim_time - self.recorded_sim_time) <= TIME_TOLERANCE
             and all(
                 name in verdicts
@@ -160,15 +167,20 @@ def load_failure(run_directory: Path, episode: int) -> tuple[RunConfig, dict[str
 
 
 def _what_became_of(run_directory: Path, episode: int) -> str:
-    """The start of the reason why ``episode`` has no failure to replay: how it ended, or which
-    episodes the run played (from ``episodes.parquet``; just "the run recorded" without it)."""
+    """The start of the reason why ``episode`` has no failure to replay: how it ended (with
+    the error of a SUT that erred), or which episodes the run played (from
+    ``episodes.parquet``; just "the run recorded" without it)."""
     try:
-        played = pd.read_parquet(run_directory / "episodes.parquet", columns=["episode", "outcome"])
+        played = pd.read_parquet(run_directory / "episodes.parquet")
     except (OSError, ValueError):
         return "the run recorded"
     row = played[played["episode"] == episode]
     if not row.empty:
-        return f"it ended as {row['outcome'].iloc[0]!r}; the run recorded"
+        outcome = row["outcome"].iloc[0]
+        if outcome == "sut_error":
+            error = sut_error_of(EpisodeSummary.from_row(row.iloc[0].to_dict()))
+            return f"it ended in a SUT error, which tested nothing: {error}; the run recorded"
+        return f"it ended as {outcome!r}; the run recorded"
     if played.empty:
         return "the run played no episode and recorded"
     first, last = int(played["episode"].min()), int(played["episode"].max())
@@ -177,12 +189,14 @@ def _what_became_of(run_directory: Path, episode: int) -> str:
 
 def load_violations(run_directory: Path, episode: int) -> list[dict[str, Any]]:
     """The rows of ``violations.parquet`` for one episode (none for a run without
-    requirements beyond the contact rule)."""
+    requirements beyond the contact rule, nor for an episode that ended in a SUT error: it
+    tested nothing, though runs before 0.2.0 recorded its violations)."""
     path = run_directory / "violations.parquet"
     if not path.is_file():
         return []
     violations = pd.read_parquet(path)
-    return list(violations[violations["episode"] == episode].to_dict("records"))
+    mine = violations[violations["episode"] == episode]
+    return [row for row in mine.to_dict("records") if row.get("outcome") != "sut_error"]
 
 
 def names_sut_plugins(config: RunConfig) -> bool:

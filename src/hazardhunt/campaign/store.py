@@ -36,10 +36,7 @@ from typing import Any
 import pandas as pd
 import pyarrow.parquet as pq
 
-from hazardhunt.campaign.records import (
-    FirstError,
-    RequirementCount,
-)
+from hazardhunt.campaign.records import FirstError, RequirementCount, requirement_count
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -273,9 +270,9 @@ class RunStore:
         """Failures the classifier raised on or gave no class name for (recorded as ``other``)."""
         self.first_classifier_error: FirstError | None = None
         """The first of them: its ``episode`` and ``error`` (the plug-in and what it raised)."""
-        self.requirements: dict[str, RequirementCount] = {}
-        """Each requirement's violations so far (the run's requirements beyond the contact
-        rule)."""
+        self.requirements = {name: requirement_count() for name in self.formulas}
+        """Each requirement's episodes judged and violations so far (the run's requirements
+        beyond the contact rule)."""
         self._trajectory_rows: list[dict[str, Any]] = []
         self._buffered_failures = 0
         self._parts = 0
@@ -370,16 +367,11 @@ class RunStore:
         return [name for name in self.classifier.classes_for(self.field) if name in found]
 
     def _count(self, name: str, episode: int, verdict: Verdict) -> None:
-        count = self.requirements.setdefault(
-            name,
-            {
-                "violations": 0,
-                "first_violation_episode": None,
-                "min_robustness": verdict.robustness,
-                "decided_by": {},
-            },
-        )
-        count["min_robustness"] = min(count["min_robustness"], verdict.robustness)
+        count = self.requirements.setdefault(name, requirement_count())
+        count["judged"] += 1
+        lowest = count["min_robustness"]
+        robustness = verdict.robustness
+        count["min_robustness"] = robustness if lowest is None else min(lowest, robustness)
         if verdict.violated:
             count["violations"] += 1
             if count["first_violation_episode"] is None:
@@ -388,7 +380,8 @@ class RunStore:
             count["decided_by"][signals] = count["decided_by"].get(signals, 0) + 1
 
     def requirement_summary(self) -> dict[str, RequirementCount]:
-        """Each requirement's violations, first violating episode and lowest robustness."""
+        """Each requirement's episodes judged (an episode that ended as ``sut_error`` is not:
+        it tested nothing), violations, first violating episode and lowest robustness."""
         return {
             name: RequirementCount(**{**count, "decided_by": dict(count["decided_by"])})
             for name, count in self.requirements.items()

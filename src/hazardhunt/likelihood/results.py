@@ -3,6 +3,9 @@ how it converged, the most likely failures, and what plain Monte Carlo would hav
 
 Everything here is computed from the episode table alone (each episode's failure, class, log
 likelihood and log likelihood ratio), so an estimate is recomputed from stored results.
+
+An episode that ended in a SUT error tested nothing: the estimate and its interval are over the
+tested episodes alone, and ``untested`` says what the others leave open (:data:`LEFT_OUT`).
 """
 
 from __future__ import annotations
@@ -17,7 +20,12 @@ import numpy as np
 import pandas as pd
 
 from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
-from hazardhunt.likelihood.run import EstimateConfig, EstimateError, nothing_tested
+from hazardhunt.likelihood.run import (
+    EstimateConfig,
+    EstimateError,
+    first_sut_error,
+    nothing_tested,
+)
 from hazardhunt.likelihood.splitting import SplittingPlanner, level_records, splitting_estimate
 
 TARGET_RELATIVE_ERROR = 0.3
@@ -33,6 +41,26 @@ CAVEATS = {
 }
 """What an estimator's interval does not cover, said beside its estimate (plain Monte Carlo's
 interval is exact: nothing to say)."""
+LEFT_OUT = {
+    "mc": "plain Monte Carlo over the tested episodes estimates the probability of a failure "
+    "among the encounters the SUT plays: per encounter if its errors have nothing to do with "
+    "the encounter, and within the range above whatever they do.",
+    "ce": "importance sampling over the tested episodes, each weighted by its likelihood ratio, "
+    "is unbiased only if the SUT's errors have nothing to do with the encounter drawn; where "
+    "they do (errors where the proposal looks, say), the estimate can be off either way and "
+    "the method has no correction for it: rely on the range above, or mend the SUT.",
+    "splitting": "splitting takes each level's share over its tested samples: the probability "
+    "of a failure among the encounters the SUT plays (per encounter if its errors have nothing "
+    "to do with the encounter); the upper end of the range above counts as failures only the "
+    "erred samples that reached the last level.",
+}
+"""How each method leaves out the episodes that ended in a SUT error, and what that assumes."""
+CHAIN_ERRORS = (
+    " {errors:,} samples of the levels beyond the first ended in a SUT error: the correlation "
+    "along the chains, which widens the interval, counts them as misses, which Au and Beck's "
+    "interval has no correction for; compare with plain Monte Carlo (--method mc)."
+)
+"""Said besides :data:`LEFT_OUT` when a splitting chain's samples erred."""
 NOTES = ("caveat", "levels_warning")
 """The keys of ``estimate.json`` that hold what to say beside the estimate (None: nothing)."""
 STUCK_CHAINS = 0.1
@@ -42,40 +70,34 @@ stood still."""
 
 def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> dict[str, Any]:
     """The estimate of ``table``'s episodes, as ``estimate.json`` holds it; ``threshold`` is the
-    score of a failure (the encounters' ``threshold``).
+    score of a failure (the encounters' ``threshold``). The probability, its interval, the
+    classes' and the convergence are over the episodes the SUT played.
 
     Raises:
-        EstimateError: Every episode ended in a SUT error (nothing was tested), or a weight
-            overflows.
+        EstimateError: No episode the estimate counts was tested (each ended in a SUT error),
+            every sample of a splitting level did, or a weight overflows.
     """
-    errors = int(table["sut_error"].sum())
-    if errors == len(table):
-        raise EstimateError(nothing_tested(table))
+    untested = nothing_tested(config, table)
+    if untested is not None:
+        raise EstimateError(untested)
     classes_found = sorted(set(table.loc[table["failure"], "failure_class"]))
     if config.estimator.method == "splitting":
         overall, classes, points, counted = _splitting(config, table, classes_found, threshold)
     else:
         overall, classes, points, counted = _weighted(table, classes_found)
     levels = _levels(config, table, threshold)
-    untested = None
-    if errors:
-        # An encounter the SUT could not play may have been a failure: the probability of a
-        # failure lies between the estimate's low end and the high end of this one.
-        errored = table["sut_error"].to_numpy(bool)
-        failed_or_errored = table["failure"].to_numpy(bool) | errored
-        untested = {
-            "probability": _event(config, table, errored, threshold).record(),
-            "failure_or_untested": _event(config, table, failed_or_errored, threshold).record(),
-        }
+    errors = int(table["sut_error"].sum())
     return {
         "scenario": config.scenario,
         "field": config.field,
         "method": config.estimator.method,
         "episodes": len(table),
         "episodes_counted": counted,
+        "episodes_tested": len(table) - errors,
         "sut_errors": errors,
+        "first_sut_error": first_sut_error(table),
         "probability": overall.record(),
-        "untested": untested,
+        "untested": _untested(config, table, threshold, levels) if errors else None,
         "classes": classes,
         "monte_carlo_equivalent": monte_carlo_equivalent(overall, len(table)),
         "caveat": CAVEATS.get(config.estimator.method),
@@ -86,12 +108,36 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
     }
 
 
+def _untested(
+    config: EstimateConfig, table: pd.DataFrame, threshold: float, levels: Any
+) -> dict[str, Any]:
+    """What the episodes that ended in a SUT error leave open: how likely such an encounter
+    is, and the probability of a failure with them counted as safe (the low end of where it
+    lies, whatever they would have done) and as failures (the high end), by the estimate's
+    method; and what leaving them out assumes."""
+    errored = table["sut_error"].to_numpy(bool)
+    failed = table["failure"].to_numpy(bool)
+    note = LEFT_OUT[config.estimator.method]
+    in_chains = sum(level["sut_errors"] for level in (levels or [])[1:])
+    if in_chains:
+        note += CHAIN_ERRORS.format(errors=in_chains)
+    return {
+        "probability": _event(config, table, errored, threshold).record(),
+        "failure_and_tested": _event(config, table, failed, threshold).record(),
+        "failure_or_untested": _event(config, table, failed | errored, threshold).record(),
+        "note": note,
+    }
+
+
 def _levels(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> Any:
     """Multilevel splitting's levels, to see how its chains went (None for the others)."""
     if config.estimator.method != "splitting":
         return None
     planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
-    records, _ = level_records(planner, table, table["failure"].to_numpy(bool))
+    try:
+        records, _ = level_records(planner, table, table["failure"].to_numpy(bool))
+    except ValueError as error:
+        raise EstimateError(f"splitting: {error}: no probability can be given") from None
     return [asdict(record) for record in records]
 
 
@@ -120,20 +166,22 @@ def _weighted(
     table: pd.DataFrame, classes_found: list[str]
 ) -> tuple[Estimate, dict[str, Any], list[dict[str, float]], int]:
     """Monte Carlo and importance sampling: the weighted mean over the episodes drawn once the
-    proposal stopped moving."""
+    proposal stopped moving that the SUT played (each keeps its weight: the ones that ended in
+    a SUT error are left out, :data:`LEFT_OUT`)."""
     counted = table[~table["adapting"]]
     if counted.empty:
         raise EstimateError(
             "every batch was spent moving the proposal; give more episodes (or a larger "
             "adapt_share) so that some are drawn from the final one"
         )
-    failed = counted["failure"].to_numpy(bool)
-    log_w = counted["log_weight"].to_numpy(float)
-    defensive = counted["defensive"].to_numpy(float)
+    tested = counted[~counted["sut_error"]]
+    failed = tested["failure"].to_numpy(bool)
+    log_w = tested["log_weight"].to_numpy(float)
+    defensive = tested["defensive"].to_numpy(float)
     try:
         overall = estimate(failed, log_w, defensive)
         classes = {
-            name: estimate(counted["failure_class"].to_numpy() == name, log_w, defensive).record()
+            name: estimate(tested["failure_class"].to_numpy() == name, log_w, defensive).record()
             for name in classes_found
         }
     except OverflowError as error:
@@ -144,10 +192,11 @@ def _weighted(
 def _event(
     config: EstimateConfig, table: pd.DataFrame, event: np.ndarray, threshold: float
 ) -> Estimate:
-    """The probability of the episodes ``event`` marks, by the estimate's own method."""
+    """The probability of the episodes ``event`` marks, by the estimate's own method, over
+    every episode it counts (those that ended in a SUT error too)."""
     if config.estimator.method == "splitting":
         planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
-        return splitting_estimate(planner, table, event)[0]
+        return splitting_estimate(planner, table, event, tested_only=False)[0]
     counted = ~table["adapting"].to_numpy(bool)
     try:
         return estimate(
@@ -162,10 +211,13 @@ def _event(
 def _splitting(
     config: EstimateConfig, table: pd.DataFrame, classes_found: list[str], threshold: float
 ) -> tuple[Estimate, dict[str, Any], list[dict[str, float]], int]:
-    """Multilevel splitting: the product of the levels' shares."""
+    """Multilevel splitting: the product of the levels' shares (over their tested samples)."""
     planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
     failed = table["failure"].to_numpy(bool)
-    overall, progress = splitting_estimate(planner, table, failed)
+    try:
+        overall, progress = splitting_estimate(planner, table, failed)
+    except ValueError as error:
+        raise EstimateError(f"splitting: {error}: no probability can be given") from None
     classes = {
         name: splitting_estimate(planner, table, table["failure_class"].to_numpy() == name)[
             0
@@ -176,7 +228,10 @@ def _splitting(
     for level in range(1, len(progress.levels) + 1):
         end = planner.per_level + (level - 1) * planner.chains * planner.moves
         part = table.iloc[:end]
-        result, _ = splitting_estimate(planner, part, part["failure"].to_numpy(bool))
+        try:
+            result, _ = splitting_estimate(planner, part, part["failure"].to_numpy(bool))
+        except ValueError:  # a level of it with no tested sample
+            continue
         points.append(
             {
                 "episodes": float(end),
@@ -206,9 +261,10 @@ def monte_carlo_equivalent(result: Estimate, spent: int) -> dict[str, Any] | Non
 
 
 def convergence(table: pd.DataFrame) -> list[dict[str, float]]:
-    """The estimate after each batch: episodes, probability, interval."""
+    """The estimate after each batch: episodes (played), probability, interval (over the
+    tested episodes)."""
     points = []
-    counted = table[~table["adapting"]]
+    counted = table[~table["adapting"] & ~table["sut_error"]]
     for batch in sorted(set(counted["batch"])):
         part = counted[counted["batch"] <= batch]
         try:

@@ -78,18 +78,35 @@ class EstimateConfig(BaseModel):
 
 
 class EstimateError(HazardhuntError):
-    """An estimate that could not be done (every episode a SUT error, a weight that overflows)."""
+    """An estimate that could not be done (no episode it counts was tested, a weight that
+    overflows)."""
 
 
-def nothing_tested(table: pd.DataFrame) -> str:
-    """Why an estimate whose every episode ended in a SUT error gives no probability, with the
-    first error (a table written before errors were recorded has none to name)."""
-    first = next((e for e in table.get("error", ()) if isinstance(e, str) and e), None)
+def nothing_tested(config: EstimateConfig, table: pd.DataFrame) -> str | None:
+    """Why ``config``'s estimate of ``table``'s episodes gives no probability when every
+    episode it counts (``ce``: those drawn once its proposal stopped moving; the others: all)
+    ended in a SUT error, with the first error (a table written before errors were recorded has
+    none to name); None when some of them were tested."""
+    counted = table
+    if config.estimator.method == "ce" and not table["sut_error"].all():
+        counted = table[~table["adapting"].to_numpy(bool)]
+        which = f"{len(counted)} episodes drawn from the final proposal, the ones it counts,"
+    else:
+        which = f"{len(table)} episodes"
+    if counted.empty or not counted["sut_error"].all():
+        return None
+    first = first_sut_error(counted)
     cause = f" (the first: {first})" if first else ""
     return (
-        f"every one of the {len(table)} episodes ended in a SUT error{cause}: nothing was "
-        "tested, no probability can be given"
+        f"every one of the {which} ended in a SUT error{cause}: nothing was tested, no "
+        "probability can be given"
     )
+
+
+def first_sut_error(table: pd.DataFrame) -> str | None:
+    """What the SUT raised (or how it failed) in the first of ``table``'s episodes that ended
+    in a SUT error; None if none did, or the table was written before errors were recorded."""
+    return next((e for e in table.get("error", ()) if isinstance(e, str) and e), None)
 
 
 BATCHES_AT_LEAST: dict[str, int] = {"mc": 1, "ce": 3, "splitting": 2}
@@ -217,6 +234,10 @@ class EstimateRun:
 
         Args:
             progress: Called with (episodes played, episodes in all) after each batch.
+
+        Raises:
+            EstimateError: No episode the estimate counts was tested, each ended in a SUT
+                error (:func:`nothing_tested`); nothing of the estimate is kept.
         """
         tables = self.played()
         config = self.config
@@ -234,9 +255,10 @@ class EstimateRun:
         if progress is not None:
             progress(config.episodes, config.episodes)
         table = pd.concat(tables, ignore_index=True)
-        if len(table) and table["sut_error"].all():
+        untested = nothing_tested(config, table) if len(table) else None
+        if untested is not None:
             self._discard(len(tables))
-            raise EstimateError(f"{nothing_tested(table)}; nothing of it was kept")
+            raise EstimateError(f"{untested}; nothing of it was kept")
         return table
 
     def _discard(self, batches: int) -> None:

@@ -19,6 +19,13 @@ only 92-93 % of repetitions (benchmarks/estimate_coverage.py).
 
 The draw of every episode (its values and noise seed) is stored like any other's, so a
 failure replays from its row; the levels are recomputed from the stored scores.
+
+An episode that ended in a SUT error tested nothing. A chain's move to one is kept only if its
+score (the risk before the error) reached the level, as any move is; each level's share is
+taken over its tested samples alone, so that the product is the probability of a failure
+among the encounters the SUT plays: ``P(score >= l_1 | tested) * P(score >= l_2 | score >= l_1,
+tested) * ...``. The correlation along the chains is still measured with such samples as
+misses; a level beyond the first that holds some says so (``sut_errors`` of its record).
 """
 
 from __future__ import annotations
@@ -178,6 +185,8 @@ class LevelRecord:
     accepted: float | None
     """The share of the chains' moves that reached the level and were kept (None for the
     first level). Few: the chains mostly stand still, and ``correlation`` is large."""
+    sut_errors: int = 0
+    """The level's samples that ended in a SUT error, left out of ``samples`` and ``share``."""
 
     @property
     def squared_cv(self) -> float:
@@ -186,17 +195,23 @@ class LevelRecord:
 
 
 def level_records(
-    planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
+    planner: SplittingPlanner,
+    table: pd.DataFrame,
+    event: NDArray[np.bool_],
+    tested_only: bool = True,
 ) -> tuple[list[LevelRecord], Progress]:
     """The levels of a splitting estimate's episodes (``table``, in order); the last level's
-    share is that of the episodes ``event`` marks. The records end at the first level of
-    share 0 (none of its samples reached the next level, or, the last, was marked).
+    share is that of the episodes ``event`` marks, each level's over its samples that did not
+    end in a SUT error (``tested_only``; else over all of them). The records end at the first
+    level of share 0 (none of its samples reached the next level, or, the last, was marked).
 
     Raises:
-        ValueError: The first level is not complete.
+        ValueError: The first level is not complete, or every sample of a level ended in a
+            SUT error.
     """
     state = planner.progress(table)
     scores = table["score"].to_numpy(float)
+    erred = table["sut_error"].to_numpy(bool) & tested_only
     if not state.levels:
         raise ValueError("the first level is not complete")
     records = []
@@ -206,27 +221,44 @@ def level_records(
         else:
             cut = state.levels[index + 1].threshold
             marks = [[bool(scores[r] >= cut) for r in chain] for chain in level.states]
-        share = float(np.mean([m for chain in marks for m in chain]))
-        samples = sum(len(chain) for chain in marks)
+        rows = level.rows()
+        tested = [m for m, r in zip(itertools.chain(*marks), rows, strict=True) if not erred[r]]
+        if not tested:
+            raise ValueError(
+                f"every one of the {len(rows)} samples of level {index} ended in a SUT error"
+            )
+        share = float(np.mean(tested))
+        samples = len(tested)
         accepted = None
         if index > 0:
             moves = [(a, b) for chain in level.states for a, b in itertools.pairwise(chain)]
             accepted = float(np.mean([a != b for a, b in moves])) if moves else None
         gamma = 0.0 if index == 0 or share <= 0.0 else _chain_correlation(marks, share)
-        records.append(LevelRecord(level.threshold, samples, share, gamma, accepted))
+        errors = len(rows) - samples
+        records.append(LevelRecord(level.threshold, samples, share, gamma, accepted, errors))
         if share <= 0.0:
             break
     return records, state
 
 
 def splitting_estimate(
-    planner: SplittingPlanner, table: pd.DataFrame, event: NDArray[np.bool_]
+    planner: SplittingPlanner,
+    table: pd.DataFrame,
+    event: NDArray[np.bool_],
+    tested_only: bool = True,
 ) -> tuple[Estimate, Progress]:
     """The probability of ``event`` (a mark per row: failures, or failures of one class) from a
     splitting estimate's episodes, with the log-normal interval on Au and Beck's coefficient of
-    variation."""
-    records, state = level_records(planner, table, event)
-    episodes, failures = len(table), int(table["failure"].sum())
+    variation: among the encounters the SUT played (``tested_only``, :func:`level_records`),
+    or among all.
+
+    Raises:
+        ValueError: The first level is not complete, or every sample of a level ended in a
+            SUT error.
+    """
+    records, state = level_records(planner, table, event, tested_only)
+    episodes = int((~(table["sut_error"].to_numpy(bool) & tested_only)).sum())
+    failures = int(table["failure"].sum())
     if records[-1].share <= 0.0:
         # A failure reaches every level: the probability is at most that of reaching the
         # last, whose estimate (the levels before) has the upper end of its interval here.

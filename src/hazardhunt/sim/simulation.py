@@ -144,7 +144,8 @@ class EpisodeResult:
     trajectory: tuple[TrajectorySample, ...] | None = None
     """The episode at every control instant and at its end, when it was kept."""
     verdicts: Mapping[str, Verdict] = field(default_factory=dict)
-    """Each of the simulation's :attr:`Simulation.requirements`' verdict on the episode."""
+    """Each of the simulation's :attr:`Simulation.requirements`' verdict on the episode; none
+    for an episode that ended as ``sut_error``, which tested nothing to judge."""
 
     @property
     def outcome(self) -> str | None:
@@ -418,7 +419,7 @@ class Simulation:
         keep = keep_trajectory(summary) if callable(keep_trajectory) else keep_trajectory
         trajectory = tuple(self.trajectory()) if keep or self.requirements else None
         verdicts = {}
-        if self.requirements and trajectory:
+        if self.requirements and trajectory and summary.outcome != "sut_error":
             response = self.field.response_time
             if self._effects is not None:
                 response += self._effects.effects.response_time
