@@ -209,6 +209,15 @@ ControllerTimeoutOption = Annotated[
         "call that exceeds it ends the episode as sut_error (default: no limit)."
     ),
 ]
+RecordedTimeoutOption = Annotated[
+    float | None,
+    typer.Option(
+        "--controller-timeout",
+        help="Wall-clock limit on each call of the controller and of the safety layer, in s, "
+        "instead of the one recorded (the run's or the case's); a call that exceeds it ends "
+        "the episode as sut_error.",
+    ),
+]
 SafetyLayerOption = Annotated[
     str | None,
     typer.Option(help="Your safety layer as package.module:Class, instead of the laser field."),
@@ -505,6 +514,7 @@ def replay(
         ),
     ] = None,
     safety_layer_param: SafetyLayerParamOption = None,
+    controller_timeout: RecordedTimeoutOption = None,
     trust_plugins: TrustPluginsOption = False,
 ) -> None:
     """Re-simulate a recorded failure and confirm it ends the same way at the same time.
@@ -518,6 +528,7 @@ def replay(
     from hazardhunt.campaign.replay import replay_failure
 
     _check_gif(gif)
+    _check_timeout(controller_timeout)
     replay = replay_failure(
         run_directory,
         episode,
@@ -525,6 +536,7 @@ def replay(
         safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
         trust_plugins=trust_plugins,
         announce=_announcer(),
+        controller_timeout=controller_timeout,
     )
     _print_replay(replay)
     if gif is not None:
@@ -555,6 +567,15 @@ def _print_replay(replay: ReplayResult) -> None:
             f"  requirement {escape(name)}: recorded robustness {robustness:.6g}, replayed "
             f"{'not judged' if again is None else f'{again.robustness:.6g}'}"
         )
+
+
+def _check_timeout(controller_timeout: float | None) -> None:
+    """Raises ConfigError unless ``controller_timeout`` (None: none given) is a limit a run
+    would take, before anything is replayed."""
+    from hazardhunt.campaign.config import EnvOptions
+
+    if controller_timeout is not None:
+        _validated(lambda: EnvOptions(controller_timeout=controller_timeout))
 
 
 def _check_gif(gif: Path | None) -> None:
@@ -766,13 +787,7 @@ def regress(
     ] = None,
     classifier: RegressClassifierOption = None,
     classifier_param: ClassifierParamOption = None,
-    controller_timeout: Annotated[
-        float | None,
-        typer.Option(
-            help="Wall-clock limit on each call of the controller and of the safety layer, in "
-            "s, instead of the case's; a call that exceeds it makes the case's verdict error."
-        ),
-    ] = None,
+    controller_timeout: RecordedTimeoutOption = None,
     trust_plugins: TrustPluginsOption = False,
     json_output: Annotated[
         bool, typer.Option("--json", help="Print the results as JSON on stdout.")
@@ -787,14 +802,12 @@ def regress(
     with 3 when some case could not be tested at all (the SUT raised, hung or returned something
     unusable: verdict "error").
     """
-    from hazardhunt.campaign.config import EnvOptions
     from hazardhunt.cases import VERDICTS, case_files, regress_case
 
     controller_spec = _plugin("--controller", controller, controller_param)
     safety_spec = _plugin("--safety-layer", safety_layer, safety_layer_param)
     classifier_spec = _plugin("--classifier", classifier, classifier_param)
-    if controller_timeout is not None:  # checked as a run checks it, before any case runs
-        _validated(lambda: EnvOptions(controller_timeout=controller_timeout))
+    _check_timeout(controller_timeout)
     files = case_files(cases)
     announce = _announcer()
     results = []
@@ -931,6 +944,7 @@ def estimate_command(
     controller_param: ControllerParamOption = None,
     safety_layer: SafetyLayerOption = None,
     safety_layer_param: SafetyLayerParamOption = None,
+    controller_timeout: ControllerTimeoutOption = None,
     workers: Annotated[int, typer.Option(min=1, max=64, help="Processes that play episodes.")] = 1,
 ) -> None:
     """The command; long because its signature is the command's options."""
@@ -956,7 +970,7 @@ def estimate_command(
             uncertainties=uncertainties,
             controller=_plugin("--controller", controller, controller_param),
             safety_layer=_plugin("--safety-layer", safety_layer, safety_layer_param),
-            env=EnvOptions(decision_period=WALKING_PERIOD),
+            env=EnvOptions(decision_period=WALKING_PERIOD, controller_timeout=controller_timeout),
             estimator=EstimatorParams(method=method, batch_size=batch_size),  # type: ignore[arg-type]
             episodes=episodes,
             seed=seed,

@@ -310,6 +310,24 @@ def test_no_command_builds_the_tester_a_received_run_names(run_with_failures, tm
     assert not marker.exists()
 
 
+def test_a_replay_whose_controller_hangs_ends_within_the_limit_given(run_with_failures, tmp_path):
+    (tmp_path / "hanging.py").write_text(
+        "import time\n"
+        "from hazardhunt.sut.pursuit import PursuitController\n"
+        "class Hanging(PursuitController):\n"
+        "    def control(self, time_s, robot, human):\n"
+        "        time.sleep(30)\n"
+    )
+    episode = int(pd.read_parquet(run_with_failures / "failures.parquet")["episode"][0])
+    done = hazardhunt(
+        "replay", run_with_failures, "--episode", episode, "--controller", "hanging:Hanging",
+        "--controller-timeout", 0.5, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 1
+    assert "NOT reproduced: the SUT erred" in done.stdout
+    assert "time limit of 0.5 s" in done.stdout + done.stderr
+
+
 def test_replay_imports_a_stored_plug_in_when_allowed_and_says_which(run_with_failures, tmp_path):
     marker = tmp_path / "imported"
     controller = marker_module(tmp_path, marker)

@@ -274,9 +274,11 @@ def replay_failure(
     safety_layer: PluginSpec | None = None,
     trust_plugins: bool = False,
     announce: Callable[[str], None] | None = None,
+    controller_timeout: float | None = None,
 ) -> ReplayResult:
     """Replay the failure of one episode of a run with its recorded actions (or its
-    violation of a requirement: :class:`ReplayResult` checks the robustness too).
+    violation of a requirement: :class:`ReplayResult` checks the robustness too), with
+    ``controller_timeout`` (in s) as the limit on each call of the SUT if given, else the run's.
 
     A run with the built-in SUT replays as it is. A controller or safety layer the run names
     is imported only when given again (``controller``, ``safety_layer``: another SUT, or the
@@ -300,6 +302,9 @@ def replay_failure(
         trust_plugins=trust_plugins,
         announce=announce,
     )
+    if controller_timeout is not None:
+        env = config.env.model_copy(update={"controller_timeout": controller_timeout})
+        config = config.model_copy(update={"env": env})
     # Judged by the formulas recorded with the violations, not by the run's requirement files,
     # which may have changed or moved since.
     formulas = {str(v["requirement"]): str(v.get("formula") or "") for v in violations}

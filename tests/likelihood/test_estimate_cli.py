@@ -1,6 +1,7 @@
-"""Ctrl-C on an estimate keeps its batches and says how to resume it; the same command
-resumes it."""
+"""The estimate command: Ctrl-C keeps its batches and says how to resume it, and the same
+command resumes it; a SUT that hangs costs one episode within the limit given."""
 
+import json
 import os
 import signal
 import subprocess
@@ -46,3 +47,39 @@ def test_an_interrupted_estimate_says_how_to_resume_and_resumes(tmp_path):
     batches = {path.name: path.read_bytes() for path in out.glob("batches/*")}
     assert len(batches) == 2 * 10  # a table and a note per batch
     assert all(batches[name] == content for name, content in kept.items())
+
+
+HANGS_ONCE = """
+import time
+
+from hazardhunt.benchmark.conservative import ConservativeController
+
+
+class HangsInItsFirstEpisode(ConservativeController):
+    def reset(self, *args):
+        self.episodes = getattr(self, "episodes", 0) + 1
+        super().reset(*args)
+
+    def control(self, time_s, robot, human):
+        if self.episodes == 2 and time_s >= 1.0:  # the trial episode is the first
+            time.sleep(30)
+        return super().control(time_s, robot, human)
+"""
+
+
+def test_a_controller_that_hangs_is_one_sut_error_within_the_limit_given(tmp_path):
+    (tmp_path / "hangs.py").write_text(HANGS_ONCE)
+    out = tmp_path / "estimate"
+    done = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--controller", "hangs:HangsInItsFirstEpisode",
+        "--controller-timeout", 0.5, "--out", out, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    estimate = json.loads((out / "estimate.json").read_text())
+    assert (estimate["episodes"], estimate["sut_errors"]) == (100, 1)
+    assert "time limit of 0.5 s" in estimate["first_sut_error"]
+    refused = hazardhunt("estimate", "--controller-timeout", -1, "--out", tmp_path / "other")
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == "error: controller_timeout: must be greater than 0"
+    assert not (tmp_path / "other").exists()
