@@ -413,7 +413,8 @@ DEFAULT_EPISODES = 20_000
 
 def _execute_and_print(config: RunConfig, out: Path, json_output: bool) -> None:
     """Execute a run and print its summary (JSON or a table); a failed run exits with 1."""
-    from hazardhunt.campaign.run import RunFailed, execute_run
+    from hazardhunt.campaign.records import RunFailed
+    from hazardhunt.campaign.run import execute_run
 
     try:
         summary = execute_run(config, out, console=err_console)
@@ -583,7 +584,8 @@ def campaign(
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign.
 
-    Exits with code 1 when some runs raised (after the others finished); `hazardhunt report`
+    Exits with code 1 when some runs failed (they raised, or tested nothing: sut_error_limit
+    of their episodes ended in a SUT error), after the others finished; `hazardhunt report`
     reads the runs that finished.
     """
     from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
