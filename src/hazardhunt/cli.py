@@ -586,7 +586,7 @@ def campaign(
 
     Exits with code 1 when some runs failed (they raised, or tested nothing: sut_error_limit
     of their episodes ended in a SUT error), after the others finished; `hazardhunt report`
-    reads the runs that finished.
+    reads the runs that finished and names those that failed.
     """
     from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
     from hazardhunt.campaign.config import check_output_location, load_campaign
@@ -633,7 +633,12 @@ def report(
     classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write the study's figures and tables for a run or campaign into DIRECTORY/report (for
-    an estimate: its probabilities, convergence and most likely failures)."""
+    an estimate: its probabilities, convergence and most likely failures).
+
+    Exits with code 1 when runs of the campaign failed (they tested nothing, or raised): the
+    report covers the others, if any, and its verdict names them first; 2 when the directory
+    holds no results (not a run or campaign, or no run has finished yet).
+    """
     from hazardhunt.analysis.report import write_report
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
@@ -656,6 +661,7 @@ def report(
             directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
+    _exit_if_runs_failed(directory, "the report covers")
 
 
 @app.command(cls=_Command)
@@ -686,7 +692,10 @@ def export(
 ) -> None:
     """Write failures as self-contained regression cases (TOML), to re-run with regress.
 
-    Exporting imports nothing: the cases name the runs' plug-ins as data.
+    Exporting imports nothing: the cases name the runs' plug-ins as data. Exits with code 1
+    when runs of the campaign failed (they tested nothing, or raised): the cases are those of
+    the others, if any; 2 when the directory holds no results (not a run or campaign, or no
+    run has finished yet).
     """
     from hazardhunt.cases import export_cases, write_pytest_module
 
@@ -700,6 +709,7 @@ def export(
     if pytest_module:
         module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
         console.print(f"pytest module written to [bold]{module}[/bold]")
+    _exit_if_runs_failed(directory, "the cases cover")
 
 
 @app.command(cls=_Command)
@@ -730,6 +740,27 @@ def copy(
         f"{len(copied.already_there)} already there, "
         f"{len(copied.unfinished)} not finished yet; the copy is [bold]{out.resolve()}[/bold]"
     )
+
+
+def _exit_if_runs_failed(directory: Path, written: str) -> None:
+    """Name the runs of a campaign directory that failed, with their errors, in red on stderr,
+    and exit with code 1 if there are any: what the command wrote (``written``: "the report
+    covers") covers only the runs that completed, and must not read as a pass."""
+    from hazardhunt.analysis.results import failed_runs
+
+    failed = failed_runs(directory)
+    if not failed:
+        return
+    for run_id, error in failed.items():
+        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    one = len(failed) == 1
+    err_console.print(
+        f"[red]error: {len(failed)} {'run' if one else 'runs'} of the campaign failed[/red], "
+        f"so {written} only the runs that completed; run the campaign again to retry "
+        f"{'it' if one else 'them'} (errors above and in summary.json)",
+        highlight=False,
+    )
+    raise typer.Exit(1)
 
 
 def _warn_of_damaged_runs(directory: Path) -> None:

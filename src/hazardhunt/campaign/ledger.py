@@ -55,6 +55,24 @@ def failed(run: RunConfig, error: BaseException, remote_traceback: str | None = 
     return outcome
 
 
+def ledger_errors(out: Path) -> dict[str, str]:
+    """Run id -> error of every run the ledger of the campaign directory ``out`` records as
+    failed; empty if it has no readable ledger. The ledger is read as data from a file that may
+    come from anyone: entries that are not as the ledger writes them are skipped."""
+    try:
+        stored = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    entries = stored.get("runs") if isinstance(stored, dict) else None
+    errors = {}
+    for entry in entries if isinstance(entries, list) else []:
+        if isinstance(entry, dict) and entry.get("status") == "failed":
+            run_id, error = entry.get("run_id"), entry.get("error")
+            if isinstance(run_id, str):
+                errors[run_id] = str(error) if error else "no error recorded"
+    return errors
+
+
 class Ledger:
     """The campaign's ``summary.json``: how every run stands, rewritten after each change.
 
