@@ -724,7 +724,10 @@ def copy(
     The copy holds every table, summary and configuration and the testers' state; report and
     export work on it (failures of the built-in SUT replay from their actions; the clusters of
     trajectories and --reclassify need the original). Only finished runs whose files match
-    their checksums are copied; copying a campaign again adds the runs finished since.
+    their checksums are copied; copying a campaign again adds the runs finished since. Runs
+    that failed have nothing to copy: they are named on stderr (the exit code stays 0), and
+    the copy's summary.json keeps their errors, so that report and export of the copy name
+    them and exit 1 as for the original.
     """
     from hazardhunt.campaign.config import check_output_location
     from hazardhunt.campaign.copying import copy_results
@@ -735,9 +738,12 @@ def copy(
         console.print(
             f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
+    for run_id, error in copied.failed.items():
+        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    failed = f"[red]{len(copied.failed)} failed[/red] (nothing to copy), " if copied.failed else ""
     console.print(
         f"{len(copied.copied)} {'run' if len(copied.copied) == 1 else 'runs'} copied, "
-        f"{len(copied.already_there)} already there, "
+        f"{len(copied.already_there)} already there, {failed}"
         f"{len(copied.unfinished)} not finished yet; the copy is [bold]{out.resolve()}[/bold]"
     )
 

@@ -1,6 +1,7 @@
 """A campaign run that failed (it tested nothing) never reads as a pass afterwards: the
 campaign's table counts its SUT errors; report and export name it with its error and exit 1;
-and when every run failed, report and export say so instead of "not finished yet"."""
+copy copies the rest and names it as failed, not as unfinished; and when every run failed,
+report and export say so instead of "not finished yet"."""
 
 import json
 import re
@@ -113,6 +114,20 @@ def test_an_export_names_the_failed_run_and_exits_1(one_failed, tmp_path):
     assert LOST in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("error: 1 run of the campaign failed, so the cases cover only the runs")
+
+
+def test_a_copy_says_the_run_failed_and_its_report_still_does(one_failed, tmp_path):
+    results, _ = one_failed
+    copy = tmp_path / "kept"
+    done = hazardhunt("copy", results, "--out", copy)
+    assert done.returncode == 0, done.stderr
+    assert "1 run copied, 0 already there, 1 failed (nothing to copy), 0 not finished yet" in (
+        done.stdout
+    )
+    assert done.stderr.startswith("failed: crossing__none__random__seed0: NothingTested: ")
+    report = hazardhunt("report", copy)
+    assert report.returncode == 1
+    assert LOST in report.stderr
 
 
 def test_when_every_run_failed_report_and_export_say_why(tmp_path):
