@@ -423,7 +423,8 @@ DEFAULT_EPISODES = 20_000
 
 def _execute_and_print(config: RunConfig, out: Path, json_output: bool) -> None:
     """Execute a run and print its summary (JSON or a table); a failed run exits with 1."""
-    from hazardhunt.campaign.run import RunFailed, execute_run
+    from hazardhunt.campaign.records import RunFailed
+    from hazardhunt.campaign.run import execute_run
 
     try:
         summary = execute_run(config, out, console=err_console)
@@ -613,8 +614,9 @@ def campaign(
 ) -> None:
     """Run every run of a campaign file; run it again to finish an interrupted campaign.
 
-    Exits with code 1 when some runs raised (after the others finished); `hazardhunt report`
-    reads the runs that finished.
+    Exits with code 1 when some runs failed (they raised, or tested nothing: sut_error_limit
+    of their episodes ended in a SUT error), after the others finished; `hazardhunt report`
+    reads the runs that finished and names those that failed.
     """
     from hazardhunt.campaign.campaign import EXECUTORS, CampaignFailed, run_campaign
     from hazardhunt.campaign.config import check_output_location, load_campaign
@@ -661,7 +663,12 @@ def report(
     classifier_param: ClassifierParamOption = None,
 ) -> None:
     """Write the study's figures and tables for a run or campaign into DIRECTORY/report (for
-    an estimate: its probabilities, convergence and most likely failures)."""
+    an estimate: its probabilities, convergence and most likely failures).
+
+    Exits with code 1 when runs of the campaign failed (they tested nothing, or raised): the
+    report covers the others, if any, and its verdict names them first; 2 when the directory
+    holds no results (not a run or campaign, or no run has finished yet).
+    """
     from hazardhunt.analysis.report import write_report
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
@@ -684,6 +691,7 @@ def report(
             directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
+    _exit_if_runs_failed(directory, "the report covers")
 
 
 @app.command(cls=_Command)
@@ -714,7 +722,10 @@ def export(
 ) -> None:
     """Write failures as self-contained regression cases (TOML), to re-run with regress.
 
-    Exporting imports nothing: the cases name the runs' plug-ins as data.
+    Exporting imports nothing: the cases name the runs' plug-ins as data. Exits with code 1
+    when runs of the campaign failed (they tested nothing, or raised): the cases are those of
+    the others, if any; 2 when the directory holds no results (not a run or campaign, or no
+    run has finished yet).
     """
     from hazardhunt.cases import export_cases, write_pytest_module
 
@@ -728,6 +739,7 @@ def export(
     if pytest_module:
         module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
         console.print(f"pytest module written to [bold]{module}[/bold]")
+    _exit_if_runs_failed(directory, "the cases cover")
 
 
 @app.command(cls=_Command)
@@ -742,7 +754,10 @@ def copy(
     The copy holds every table, summary and configuration and the testers' state; report and
     export work on it (failures of the built-in SUT replay from their actions; the clusters of
     trajectories and --reclassify need the original). Only finished runs whose files match
-    their checksums are copied; copying a campaign again adds the runs finished since.
+    their checksums are copied; copying a campaign again adds the runs finished since. Runs
+    that failed have nothing to copy: they are named on stderr (the exit code stays 0), and
+    the copy's summary.json keeps their errors, so that report and export of the copy name
+    them and exit 1 as for the original.
     """
     from hazardhunt.campaign.config import check_output_location
     from hazardhunt.campaign.copying import copy_results
@@ -753,11 +768,35 @@ def copy(
         console.print(
             f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
+    for run_id, error in copied.failed.items():
+        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    failed = f"[red]{len(copied.failed)} failed[/red] (nothing to copy), " if copied.failed else ""
     console.print(
         f"{len(copied.copied)} {'run' if len(copied.copied) == 1 else 'runs'} copied, "
-        f"{len(copied.already_there)} already there, "
+        f"{len(copied.already_there)} already there, {failed}"
         f"{len(copied.unfinished)} not finished yet; the copy is [bold]{out.resolve()}[/bold]"
     )
+
+
+def _exit_if_runs_failed(directory: Path, written: str) -> None:
+    """Name the runs of a campaign directory that failed, with their errors, in red on stderr,
+    and exit with code 1 if there are any: what the command wrote (``written``: "the report
+    covers") covers only the runs that completed, and must not read as a pass."""
+    from hazardhunt.analysis.results import failed_runs
+
+    failed = failed_runs(directory)
+    if not failed:
+        return
+    for run_id, error in failed.items():
+        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    one = len(failed) == 1
+    err_console.print(
+        f"[red]error: {len(failed)} {'run' if one else 'runs'} of the campaign failed[/red], "
+        f"so {written} only the runs that completed; run the campaign again to retry "
+        f"{'it' if one else 'them'} (errors above and in summary.json)",
+        highlight=False,
+    )
+    raise typer.Exit(1)
 
 
 def _warn_of_damaged_runs(directory: Path) -> None:

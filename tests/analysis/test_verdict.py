@@ -112,3 +112,17 @@ def test_a_verdict_of_no_failure_does_not_read_as_a_pass():
     assert "not a proof of safety" in said
     assert "below 0.012 per tested episode" in said
     assert "hazardhunt estimate" in said
+
+
+def test_a_verdict_with_runs_that_failed_says_so_before_anything_else():
+    from hazardhunt.analysis.report import verdict_headline
+
+    results = campaign()
+    results.failed["crossing__1.25m__ppo-max__seed1"] = "NothingTested: ... tested nothing"
+    findings = verdict.verdict(results, None)
+    assert findings.failed_runs == 1
+    said = str(verdict_headline(findings))
+    assert said.startswith(
+        '<strong class="warning">1 run of the campaign failed</strong> and is not in this verdict'
+    )
+    assert "<strong>5 unsafe failures</strong> in 300 episodes of 3 runs" in said

@@ -128,12 +128,14 @@ def write_report(
 
     With a ``classifier``, every failure is classified anew from its stored trajectory (for
     another taxonomy, or runs recorded with an older one); otherwise the recorded classes count.
-    Runs whose files are damaged are left out and named in the report. The report is written
-    into a hidden sibling of ``report/`` and replaces it only once complete: a report that
-    fails (a full disk) leaves the previous one, if any, and nothing else.
+    Runs whose files are damaged are left out and named in the report, and so are the runs of
+    a campaign that failed, in its verdict first. The report is written into a hidden sibling of
+    ``report/`` and replaces it only once complete: a report that fails (a full disk) leaves the
+    previous one, if any, and nothing else.
 
     Raises:
         ResultsError: When the directory holds no complete run.
+        RunsFailed: When no run of the campaign is complete and some failed.
     """
     tell = progress if progress is not None else (lambda step: None)
     tell("reading results")
@@ -657,6 +659,14 @@ def _runs(report: _Report, results: Results) -> None:
                 "warning",
             )
         )
+    for run_id, error in results.failed.items():
+        section.blocks.append(
+            Text(
+                f"Run {run_id} failed and is left out: {error}. Running the campaign again "
+                "retries it.",
+                "warning",
+            )
+        )
     for run_id, damage in results.damaged.items():
         section.blocks.append(
             Text(
@@ -675,6 +685,8 @@ def _verdict(report: _Report, results: Results) -> None:
     section = Section("Verdict")
     report.opening = section
     section.blocks.append(Prose(verdict_headline(findings), "headline"))
+    if results.failed:
+        section.blocks.append(Text(_why_runs_failed(results.failed), "warning"))
     worst = verdict.worst_failure(results.failures)
     if worst is not None:
         section.blocks.append(Heading("The worst failure"))
@@ -706,7 +718,15 @@ def _verdict(report: _Report, results: Results) -> None:
 
 def verdict_headline(findings: verdict.Verdict) -> Markup:
     """The verdict in one sentence or two, numbers in bold (the only text in it, the class
-    names, escaped)."""
+    names, escaped), after the runs that failed, if any: what it says does not cover them."""
+    failed = findings.failed_runs
+    if failed:
+        one = failed == 1
+        return Markup(
+            f'<strong class="warning">{failed} run{_s(failed)} of the campaign failed</strong> '
+            f"and {'is' if one else 'are'} not in this verdict: nothing of "
+            f"{'it' if one else 'them'} was kept (why below). "
+        ) + verdict_headline(replace(findings, failed_runs=0))
     played = f"in {findings.episodes} episodes of {findings.runs} run{_s(findings.runs)}"
     untested = ""
     if findings.sut_errors:
@@ -742,6 +762,17 @@ def verdict_headline(findings: verdict.Verdict) -> Markup:
             f"cluster{_s(findings.clusters)}</strong>"
         )
     return Markup(text + "." + untested)
+
+
+def _why_runs_failed(failed: dict[str, str]) -> str:
+    """The error of the run that failed, or of the first of those that failed."""
+    first, error = next(iter(failed.items()))
+    if len(failed) == 1:
+        return f"Run {first} failed: {error}. Running the campaign again retries it."
+    return (
+        f"{len(failed)} runs failed; the first, {first}: {error}. Runs lists each with its "
+        "error; running the campaign again retries them."
+    )
 
 
 def _worst_facts(worst: pd.Series) -> str:
@@ -815,6 +846,7 @@ def _summary(results: Results, report: _Report) -> dict[str, Any]:
         "hazardhunt_version": hazardhunt.__version__,
         "runs": records(report.tables["runs"]),
         "unfinished_runs": results.unfinished,
+        "failed_runs": results.failed,
         "damaged_runs": results.damaged,
         "lesson_1": {
             str(row["tester"]): {
@@ -840,6 +872,7 @@ def _verdict_summary(report: _Report) -> dict[str, Any] | None:
         "clusters": findings.clusters,
         "failure_rate_upper_bound": findings.rate_bound,
         "sut_errors": findings.sut_errors,
+        "failed_runs": findings.failed_runs,
     }
 
 

@@ -6,17 +6,18 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import pandas as pd
 from pydantic import ValidationError
 
 from hazardhunt.campaign.config import RECORDED, CampaignConfig
+from hazardhunt.campaign.ledger import ledger_errors
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import REQUIREMENT_COLUMN, find_damage, left_out
-from hazardhunt.errors import InputError
+from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
@@ -33,6 +34,11 @@ RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 
 class ResultsError(InputError):
     """The directory holds no results that can be read."""
+
+
+class RunsFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
+    """No run of a campaign is complete, and some failed: there are no results to read, and
+    that is not a pass (exit code 1, as the campaign's own)."""
 
 
 @dataclass(frozen=True)
@@ -52,7 +58,12 @@ class Results:
     """One row per requirement an episode violated (``violations.parquet``), with the run's
     keys; empty for runs without requirements beyond the contact rule."""
     unfinished: list[str] = field(default_factory=list)
-    """Run ids of the campaign that have not finished (they are left out of every table)."""
+    """Run ids of the campaign that have not run yet or are running (they are left out of every
+    table)."""
+    failed: dict[str, str] = field(default_factory=dict)
+    """Run ids of the campaign that failed, with the error its ledger (``summary.json``)
+    records: a run that tested nothing (its episodes ended in ``sut_error``), or that raised or
+    could not write its results. Nothing of them was kept, so they are in no table."""
     damaged: dict[str, str] = field(default_factory=dict)
     """Run ids of the campaign whose files do not match the checksums they recorded (or do not
     read back), with what is wrong; they are left out of every table."""
@@ -106,19 +117,23 @@ def load_results_of(
     Raises:
         ResultsError: When a directory is neither, or nothing in one is complete, or it is a
             run whose files are damaged. A campaign's damaged runs are left out and listed in
-            ``damaged``.
+            ``damaged``, its failed runs in ``failed``.
+        RunsFailed: When nothing in a campaign directory is complete and some of its runs
+            failed.
     """
     directory = directories[0]
     run_directories: list[Path] = []
     unfinished: list[str] = []
+    failed: dict[str, str] = {}
     damaged: dict[str, str] = {}
     for each in directories:
-        complete, still_running, broken = _finished_runs(each)
-        if not complete:
-            raise ResultsError(f"{each}: {_why(broken)}")
-        run_directories += complete
-        unfinished += still_running
-        damaged |= broken
+        found = _finished_runs(each)
+        if not found.complete:
+            raise _nothing_complete(each, found)
+        run_directories += found.complete
+        unfinished += found.unfinished
+        failed |= found.failed
+        damaged |= found.damaged
     summaries = [_read_json(path / "summary.json") for path in run_directories]
     configs = [_read_json(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
@@ -131,18 +146,23 @@ def load_results_of(
         for name in ("episodes", "failures", "loitering", "violations")
     }
     _judge_tested_only(tables)
+    taxonomy = classifier
     if classifier is None:
         plugins = [
             recorded_classifier(config, path / "config.json")
             for config, path in zip(configs, run_directories, strict=True)
         ]
-        recorded = MechanismClassifier() if all(p is None for p in plugins) else None
-        return Results(
-            directory, runs, unfinished=unfinished, damaged=damaged, classifier=recorded, **tables
-        )
-    tables["failures"] = _reclassified(tables["failures"], runs, classifier)
+        taxonomy = MechanismClassifier() if all(p is None for p in plugins) else None
+    else:
+        tables["failures"] = _reclassified(tables["failures"], runs, classifier)
     return Results(
-        directory, runs, unfinished=unfinished, damaged=damaged, classifier=classifier, **tables
+        directory,
+        runs,
+        unfinished=unfinished,
+        failed=failed,
+        damaged=damaged,
+        classifier=taxonomy,
+        **tables,
     )
 
 
@@ -193,12 +213,34 @@ def damaged_runs(directory: Path) -> dict[str, str]:
     Raises:
         ResultsError: When ``directory`` is neither a run nor a campaign directory.
     """
-    return _finished_runs(directory)[2]
+    return _finished_runs(directory).damaged
 
 
-def _finished_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, str]]:
-    """The directories of the complete runs of a run or campaign directory, the run ids of the
-    unfinished ones and, per damaged run, what is wrong with it.
+def failed_runs(directory: Path) -> dict[str, str]:
+    """The runs of a campaign directory that failed: run id -> the error its ledger records
+    (what :func:`load_results` leaves out and lists in ``failed``); empty for a run directory.
+
+    Raises:
+        ResultsError: When ``directory`` is neither a run nor a campaign directory.
+    """
+    return _finished_runs(directory).failed
+
+
+class _Found(NamedTuple):
+    """The runs of a run or campaign directory, by how they stand."""
+
+    complete: list[Path]
+    """The directories of the complete runs."""
+    unfinished: list[str]
+    """The run ids of the runs that have not finished, and did not fail."""
+    failed: dict[str, str]
+    """Run id -> the error the campaign's ledger records."""
+    damaged: dict[str, str]
+    """Run id -> what is wrong with its files."""
+
+
+def _finished_runs(directory: Path) -> _Found:
+    """The runs of a run or campaign directory, by how they stand.
 
     Raises:
         ResultsError: When ``directory`` is neither, or is a run that is not complete.
@@ -216,34 +258,43 @@ def _finished_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, st
     damage = find_damage(directory)
     if damage is not None:
         raise ResultsError(f"{directory}: the run is damaged ({damage}); run it again")
-    return [directory], [], {}
+    return _Found([directory], [], {}, {})
 
 
-def _campaign_runs(directory: Path) -> tuple[list[Path], list[str], dict[str, str]]:
+def _campaign_runs(directory: Path) -> _Found:
+    """The runs of a campaign directory: a run that has not finished failed if the campaign's
+    ledger records it as failed, else it has not run yet (or is running)."""
     stored = directory / "campaign.json"
     try:  # what ran is read from the runs' files, its scenarios too: their files are not needed
         config = CampaignConfig.model_validate(_read_json(stored), context=RECORDED)
     except ValidationError as error:
         problem = format_validation_error(error)
         raise ResultsError(f"{stored}: not a campaign configuration: {problem}") from None
-    complete, unfinished, damaged = [], [], {}
+    errors = ledger_errors(directory)
+    found = _Found([], [], {}, {})
     for run in config.runs(RECORDED):
         path = directory / "runs" / run.run_id
         if not is_finished(path):
-            unfinished.append(run.run_id)
+            if run.run_id in errors:
+                found.failed[run.run_id] = errors[run.run_id]
+            else:
+                found.unfinished.append(run.run_id)
         elif (damage := find_damage(path)) is not None:
-            damaged[run.run_id] = damage
+            found.damaged[run.run_id] = damage
         else:
-            complete.append(path)
-    return complete, unfinished, damaged
+            found.complete.append(path)
+    return found
 
 
-def _why(damaged: dict[str, str]) -> str:
-    """Why no run of a campaign can be read."""
-    if not damaged:
-        return "no run of the campaign has finished yet"
-    found = "; ".join(f"{run_id} is damaged ({damage})" for run_id, damage in damaged.items())
-    return f"no run of the campaign is complete: {found}"
+def _nothing_complete(directory: Path, found: _Found) -> HazardhuntError:
+    """Why no run of a campaign can be read: ``RunsFailed`` when some failed, else a
+    ``ResultsError``."""
+    if not found.failed and not found.damaged:
+        return ResultsError(f"{directory}: no run of the campaign has finished yet")
+    reasons = [f"run {run_id} failed ({error})" for run_id, error in found.failed.items()]
+    reasons += [f"{run_id} is damaged ({damage})" for run_id, damage in found.damaged.items()]
+    message = f"{directory}: no run of the campaign is complete: {'; '.join(reasons)}"
+    return RunsFailed(message) if found.failed else ResultsError(message)
 
 
 def _stacked(

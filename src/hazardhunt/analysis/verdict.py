@@ -50,6 +50,9 @@ class Verdict:
     sut_errors: int = 0
     """Episodes that ended in ``sut_error``: the controller or safety layer raised, hung or
     returned something unusable, so they tested nothing."""
+    failed_runs: int = 0
+    """Runs of the campaign that failed (tested nothing, or raised): none of the numbers
+    above counts them."""
 
 
 def verdict(results: Results, clusters: pd.DataFrame | None) -> Verdict:
@@ -69,6 +72,7 @@ def verdict(results: Results, clusters: pd.DataFrame | None) -> Verdict:
         clusters=_all_clusters(clusters),
         rate_bound=tables.clopper_pearson(count, episodes - sut_errors)[1],
         sut_errors=sut_errors,
+        failed_runs=len(results.failed),
     )
 
 

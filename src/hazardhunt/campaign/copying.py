@@ -21,6 +21,7 @@ from hazardhunt.campaign.config import (
     first_difference,
     read_stored_campaign,
 )
+from hazardhunt.campaign.ledger import ledger_errors
 from hazardhunt.campaign.records import campaign_totals
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
@@ -40,6 +41,9 @@ class Copied:
     copied: list[str] = field(default_factory=list)
     already_there: list[str] = field(default_factory=list)
     unfinished: list[str] = field(default_factory=list)
+    """Runs that have not run yet, or are running."""
+    failed: dict[str, str] = field(default_factory=dict)
+    """Runs the campaign's ledger records as failed, with their errors: nothing to copy."""
     damaged: dict[str, str] = field(default_factory=dict)
 
 
@@ -94,9 +98,12 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
         raise ConfigError(f"{destination}: exists and holds something else than this campaign")
     (destination / "runs").mkdir(parents=True, exist_ok=True)
     copied = Copied()
+    errors = ledger_errors(source)
     for run in config.runs(RECORDED):  # what ran: its scenario files are not needed
         path = source / "runs" / run.run_id
-        if not is_finished(path):
+        if not is_finished(path) and run.run_id in errors:
+            copied.failed[run.run_id] = errors[run.run_id]
+        elif not is_finished(path):
             copied.unfinished.append(run.run_id)
         elif (damage := find_damage(path)) is not None:
             copied.damaged[run.run_id] = damage

@@ -6,13 +6,19 @@ from __future__ import annotations
 
 import json
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import cast
 
 from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_difference
-from hazardhunt.campaign.records import CampaignSummary, LedgerEntry, RunSummary, campaign_totals
+from hazardhunt.campaign.records import (
+    CampaignSummary,
+    LedgerEntry,
+    NothingTested,
+    RunSummary,
+    campaign_totals,
+)
 from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.scenario_record import played_before_change
@@ -30,16 +36,41 @@ class RunOutcome:
     traceback: str | None = None
     ray_node: str | None = None
     """The id of the Ray node that executed the run (the ``ray`` executor only)."""
+    episodes: int | None = None
+    """The episodes a run that tested nothing (``NothingTested``) played before it stopped."""
+    sut_errors: int | None = None
+    """How many of those ended in ``sut_error``."""
 
 
-def failed(run: RunConfig, error: BaseException) -> RunOutcome:
-    """The outcome of a run that raised ``error``."""
-    return RunOutcome(
+def failed(run: RunConfig, error: BaseException, remote_traceback: str | None = None) -> RunOutcome:
+    """The outcome of a run that raised ``error`` (on another machine: ``remote_traceback``)."""
+    outcome = RunOutcome(
         run,
         None,
         f"{type(error).__name__}: {error}",
-        "".join(traceback.format_exception(error)),
+        remote_traceback or "".join(traceback.format_exception(error)),
     )
+    if isinstance(error, NothingTested):
+        return replace(outcome, episodes=error.episodes, sut_errors=error.sut_errors)
+    return outcome
+
+
+def ledger_errors(out: Path) -> dict[str, str]:
+    """Run id -> error of every run the ledger of the campaign directory ``out`` records as
+    failed; empty if it has no readable ledger. The ledger is read as data from a file that may
+    come from anyone: entries that are not as the ledger writes them are skipped."""
+    try:
+        stored = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    entries = stored.get("runs") if isinstance(stored, dict) else None
+    errors = {}
+    for entry in entries if isinstance(entries, list) else []:
+        if isinstance(entry, dict) and entry.get("status") == "failed":
+            run_id, error = entry.get("run_id"), entry.get("error")
+            if isinstance(run_id, str):
+                errors[run_id] = str(error) if error else "no error recorded"
+    return errors
 
 
 class Ledger:
@@ -90,6 +121,8 @@ class Ledger:
         else:
             entry = _run_keys(run, "failed")
             entry["error"], entry["traceback"] = outcome.error, outcome.traceback
+            if outcome.episodes is not None and outcome.sut_errors is not None:
+                entry["episodes"], entry["sut_errors"] = outcome.episodes, outcome.sut_errors
         self.entries[run.run_id] = entry
         self.write()
 

@@ -117,9 +117,10 @@ def shown_scenario(scenario: str) -> str:
 
 def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) -> None:
     """Per scenario x field x tester with a run that ended (complete or failed): failures of
-    the run, or over seeds their mean ± std, and the mean wall time; then what is left to
-    do. Groups none of whose runs has been run yet are counted below the table, not listed: a
-    slice of a large grid shows its own rows."""
+    the run, or over seeds their mean ± std, the SUT errors (of the runs that failed because
+    they tested nothing too) and the mean wall time; then what is left to do. Groups none of
+    whose runs has been run yet are counted below the table, not listed: a slice of a large
+    grid shows its own rows."""
     groups: dict[tuple[str, str, str], list[LedgerEntry]] = {}
     for entry in summary["runs"]:
         key = (entry["scenario"], entry["field"], entry["tester"])
@@ -140,7 +141,7 @@ def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) 
             continue
         complete = [e for e in entries if e["status"] == "complete"]
         failures = [int(e["failures"]) for e in complete]
-        sut_errors = sum(int(e.get("sut_errors", 0)) for e in complete)
+        sut_errors = sum(_sut_errors(e) for e in entries)
         wall_times = [float(e["wall_time_s"]) for e in complete]
         table.add_row(
             escape(shown_scenario(scenario)),
@@ -158,7 +159,7 @@ def print_campaign_table(console: Console, summary: CampaignSummary, out: Path) 
 def _print_what_is_left(
     console: Console, summary: CampaignSummary, out: Path, not_started: int
 ) -> None:
-    """Below the campaign's table: the runs that raised, the totals, and what is left to do;
+    """Below the campaign's table: the runs that failed, the totals, and what is left to do;
     ``not_started`` groups of the grid were left out of the table."""
     for entry in summary["runs"]:
         if entry["status"] == "failed":
@@ -168,14 +169,15 @@ def _print_what_is_left(
         f"{summary['failures']} failures in {summary['episodes']} episodes; "
         f"results in [bold]{out.resolve()}[/bold] (summary.json, runs/)"
     )
-    if summary.get("sut_errors"):
+    if sut_errors := sum(_sut_errors(entry) for entry in summary["runs"]):
         console.print(
-            f"[red]warning: {summary['sut_errors']} episodes ended in a SUT error and tested "
-            "nothing[/red] (the column SUT errors; each run's first in its summary.json)"
+            f"[red]warning: {sut_errors} episodes ended in a SUT error and tested "
+            "nothing[/red] (the column SUT errors; each run's first in its summary.json or its "
+            "error)"
         )
     if summary["runs_failed"]:
         console.print(
-            f"[red]runs that raised: {summary['runs_failed']}[/red] (errors in summary.json); "
+            f"[red]runs that failed: {summary['runs_failed']}[/red] (errors in summary.json); "
             "run the same command again to retry them"
         )
     if summary["runs_pending"]:
@@ -189,6 +191,12 @@ def _print_what_is_left(
             f"{summary['runs_pending']} runs not run yet{unlisted}: run the campaign again "
             "(with other --runs patterns, or without) to run them"
         )
+
+
+def _sut_errors(entry: LedgerEntry) -> int:
+    """The episodes of a run that ended in ``sut_error``: of a complete run, and of one that
+    failed because it tested nothing (0 for the other runs)."""
+    return int(entry.get("sut_errors") or 0) if entry["status"] != "pending" else 0
 
 
 def _mean_std(counts: list[int]) -> str:

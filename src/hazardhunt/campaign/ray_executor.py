@@ -56,7 +56,7 @@ def execute_on_ray(
             except ray.exceptions.RayError as error:
                 # The cause names the run's own exception; the error holds its remote traceback.
                 cause = getattr(error, "cause", None) or error
-                on_outcome(RunOutcome(run, None, f"{type(cause).__name__}: {cause}", str(error)))
+                on_outcome(failed(run, cause, remote_traceback=str(error)))
                 continue
             for text in given:
                 print_warning(text)

@@ -1,12 +1,14 @@
 """The records a run and a campaign write about themselves (``summary.json``), typed: what
-moves between a run, the executors, the ledger and the commands; and the CPU clock a run's
-record reads."""
+moves between a run, the executors, the ledger and the commands (a run's summary, or the error
+of a run that failed); and the CPU clock a run's record reads."""
 
 from __future__ import annotations
 
 import resource
 import time
 from typing import Any, TypedDict
+
+from hazardhunt.errors import HazardhuntError
 
 
 def cpu_seconds() -> float:
@@ -15,6 +17,23 @@ def cpu_seconds() -> float:
     a run records the difference over its episodes as ``cpu_time_s``."""
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.process_time() + children.ru_utime + children.ru_stime
+
+
+class RunFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
+    """A run could not write its results (a full disk, say), or tested nothing; nothing of it
+    was kept."""
+
+
+class NothingTested(RunFailed):
+    """So many of a run's episodes ended in ``sut_error`` (``sut_error_limit``) that it cannot
+    stand for a test of the system: its results are not kept, and the message names the first
+    error. ``episodes`` counts the episodes it played, ``sut_errors`` those of them that ended in
+    ``sut_error``: a campaign records both with the failed run."""
+
+    def __init__(self, message: str, episodes: int = 0, sut_errors: int = 0) -> None:
+        super().__init__(message)  # only the message is an argument: it pickles with the counts
+        self.episodes = episodes
+        self.sut_errors = sut_errors
 
 
 class FirstError(TypedDict):
@@ -99,7 +118,9 @@ class RunSummary(TypedDict, total=False):
 
 class LedgerEntry(RunSummary, total=False):
     """A run as a campaign's ``summary.json`` lists it: its summary (without checksums) once
-    complete, else its keys; and how it stands."""
+    complete, else its keys; and how it stands. A run that failed because it tested nothing
+    keeps ``episodes`` (those it played before it stopped) and ``sut_errors`` (how many of them
+    ended in ``sut_error``), which the campaign's totals leave out."""
 
     status: str
     """``complete``, ``failed`` or ``pending``."""

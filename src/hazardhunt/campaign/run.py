@@ -39,12 +39,11 @@ import hazardhunt
 from hazardhunt.campaign.config import STORED, ConfigError, RunConfig, first_difference
 from hazardhunt.campaign.lock import exclusive_lock
 from hazardhunt.campaign.plugins import make_classifier, make_plugin_tester
-from hazardhunt.campaign.records import RunSummary, cpu_seconds
+from hazardhunt.campaign.records import NothingTested, RunFailed, RunSummary, cpu_seconds
 from hazardhunt.campaign.scenario_record import SCENARIO_FILE, played_before_change
 from hazardhunt.campaign.simulations import check_sut, simulation_of
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
-from hazardhunt.errors import HazardhuntError
 from hazardhunt.spec.failure_classes import OTHER
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
@@ -130,7 +129,7 @@ def record_run(
             done, failures = record.episode + 1, store.failure_count
             progress(RunProgress(done, config.episodes, failures, elapsed, store.sut_error_count))
         if store.sut_error_count >= config.sut_error_limit * config.episodes:
-            raise NothingTested(config, store)  # the run can no longer pass
+            raise _nothing_tested(config, store)  # the run can no longer pass
 
     recorder = _recorder(config, AGVEnv.wrapping(simulation, reward_of(tester)), on_episode)
     if progress is not None:
@@ -183,7 +182,7 @@ def _check_played(config: RunConfig, store: RunStore) -> None:
     """Raises RunFailed unless the run tested its SUT (``NothingTested``) with every episode of
     its budget, no more and no fewer."""
     if store.sut_error_count >= config.sut_error_limit * len(store.episodes):
-        raise NothingTested(config, store)  # a tester that played no episode, too
+        raise _nothing_tested(config, store)  # a tester that played no episode, too
     if len(store.episodes) != config.episodes:
         raise RunFailed(
             f"run {config.run_id}: its tester played {len(store.episodes)} episodes of a budget "
@@ -230,28 +229,21 @@ def _run_summary(
     }
 
 
-class RunFailed(HazardhuntError):  # noqa: N818 - names an outcome, as the command reports it
-    """A run could not write its results (a full disk, say), or tested nothing; nothing of it
-    was kept."""
-
-
-class NothingTested(RunFailed):
-    """So many of a run's episodes ended in ``sut_error`` (``sut_error_limit``) that it cannot
-    stand for a test of the system: its results are not kept, and the message names the first
-    error."""
-
-    def __init__(self, config: RunConfig, store: RunStore) -> None:
-        played, first = len(store.episodes), store.first_sut_error
-        if first is None:
-            message = "its tester played no episode, so it tested nothing"
-        else:
-            share = "every one" if store.sut_error_count == played else store.sut_error_count
-            message = (
-                f"{share} of its {played} episodes ended in a SUT error, so it tested nothing "
-                f"(sut_error_limit {config.sut_error_limit:g}); the first, episode "
-                f"{first['episode']}: {first['error']}"
-            )
-        super().__init__(f"run {config.run_id}: {message}; nothing of it was kept")
+def _nothing_tested(config: RunConfig, store: RunStore) -> NothingTested:
+    """The error of ``config``'s run, whose episodes so far ``store`` holds, that tested
+    nothing."""
+    played, first = len(store.episodes), store.first_sut_error
+    if first is None:
+        message = "its tester played no episode, so it tested nothing"
+    else:
+        share = "every one" if store.sut_error_count == played else store.sut_error_count
+        message = (
+            f"{share} of its {played} episodes ended in a SUT error, so it tested nothing "
+            f"(sut_error_limit {config.sut_error_limit:g}); the first, episode "
+            f"{first['episode']}: {first['error']}"
+        )
+    message = f"run {config.run_id}: {message}; nothing of it was kept"
+    return NothingTested(message, played, store.sut_error_count)
 
 
 def is_finished(directory: Path) -> bool:
