@@ -101,7 +101,7 @@ def test_run_help_gives_tester_parameters_of_the_default_tester() -> None:
     result = command("run", "--help")
     assert result.returncode == 0, result.stderr
     text = " ".join(result.stdout.replace("│", " ").split())
-    assert "e.g. workers=2 (portfolio, cem, qd, random)" in text
+    assert "e.g. workers=2 (portfolio, cem, qd)" in text
 
 
 def test_the_list_of_commands_shows_each_summary_whole_on_its_row() -> None:
