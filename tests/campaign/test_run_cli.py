@@ -247,6 +247,11 @@ start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
             id="human-touching-the-robot",
         ),
         pytest.param(
+            ("x = 10.0, y = 5.0", "x = 8.6, y = 7.0"),
+            "human.start: (8.6, 7) overlaps an obstacle (the human is a disc of radius 0.25 m)",
+            id="human-overlapping-a-shelf",
+        ),
+        pytest.param(
             ("[human]", "[fields.wide]\ndiameter = inf\n[human]"),
             "fields.wide.diameter: diameter must be a positive number of m, not inf",
             id="inf-field-diameter",

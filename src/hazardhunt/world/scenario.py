@@ -23,6 +23,7 @@ from shapely.validation import explain_validity
 
 from hazardhunt.errors import InputError
 from hazardhunt.textfiles import format_validation_error, loads_toml
+from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
 
@@ -269,6 +270,20 @@ def _check_placement(scenario: Scenario, path: Path) -> None:
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
             )
+    _check_human_body(floor, scenario.human_start.position, path)
+
+
+def _check_human_body(floor: FloorMap, point: FloatArray, path: Path) -> None:
+    # A human whose disc starts on a wall or a shelf can never move: every episode would be
+    # played without one.
+    radius = HumanParams().radius
+    x, y = float(point[0]), float(point[1])
+    where = f"{path}: human.start: ({x:g}, {y:g})"
+    body = f"the human is a disc of radius {radius:g} m"
+    if not (radius <= x <= floor.width - radius and radius <= y <= floor.height - radius):
+        raise ScenarioError(f"{where} lies too near the edge of the floor ({body})")
+    if floor.disc_blocked_at(x, y, radius):
+        raise ScenarioError(f"{where} overlaps an obstacle ({body})")
 
 
 def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
