@@ -40,7 +40,7 @@ from hazardhunt.campaign.plugins import (
 )
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import SimulationSettings, decisions_in, whole_multiple
-from hazardhunt.spec.outcomes import TerminationParams
+from hazardhunt.spec.outcomes import MAX_EPISODE_DURATION, TerminationParams
 from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
@@ -75,8 +75,6 @@ class _Strict(BaseModel):
 Seconds = Annotated[float, Strict(), Field(gt=0)]
 """A positive, finite time in s: an int or a float, not a string or a boolean."""
 
-MAX_EPISODE_DURATION = 3600.0
-"""The longest episode, in s of simulated time."""
 MIN_STALL_DURATION = 0.05
 """The shortest stall limit, in s: one physics step."""
 MAX_CONTROLLER_TIMEOUT = 86_400.0
