@@ -90,7 +90,7 @@ def refused_value(problem: ErrorDetails) -> str:
     if kind == "missing":
         return "missing"
     if kind in _KINDS:
-        return f"must be {_KINDS[kind]}, not {_shown(value)}"
+        return f"must be {_KINDS[kind]}, not {shown_value(value)}"
     if kind == "too_short" and (problem.get("ctx") or {}).get("min_length") == 1:
         return "must not be empty"
     message = str(problem["msg"]).removeprefix("Value error, ")
@@ -98,8 +98,8 @@ def refused_value(problem: ErrorDetails) -> str:
     return re.sub(r"^(Input|List|Tuple|String|Dictionary) should ", "must ", message)
 
 
-def _shown(value: Any) -> str:
-    """A value as a TOML file writes it, cut short."""
+def shown_value(value: Any) -> str:
+    """A value as a TOML file writes it, cut short: ``true``, ``"1.1"``, ``[1, 2]``."""
     if isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, str):
@@ -107,7 +107,7 @@ def _shown(value: Any) -> str:
     elif isinstance(value, dict):
         text = "a table"
     elif isinstance(value, list | tuple):
-        text = "[" + ", ".join(_shown(item) for item in value) + "]"
+        text = "[" + ", ".join(shown_value(item) for item in value) + "]"
     else:
         text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."

@@ -66,6 +66,8 @@ def test_a_user_scenario_file_loads(tmp_path):
             "human.start.heading_deg: must be a finite",
         ),
         (("x = 2.0, y = 10.0", "x = -inf, y = 10.0"), "robot.start.x: must be a finite"),
+        (("x = 10.0, y = 5.0", "x = true, y = 5.0"), "human.start.x: must be a number, not true"),
+        (("x = 10.0, y = 5.0", 'x = "10", y = 5.0'), 'human.start.x: must be a number, not "10"'),
     ],
 )
 def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):

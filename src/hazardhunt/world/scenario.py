@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
@@ -81,16 +81,20 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
+Number = Annotated[float, Strict()]
+"""An int or a float: a file's ``true`` or ``"10"`` is refused, not read as 1 or 10."""
+
+
 class _PointSpec(_Strict):
-    x: float
-    y: float
+    x: Number
+    y: Number
 
 
 class _PoseSpec(_PointSpec):
-    heading_deg: float = 0.0
+    heading_deg: Number = 0.0
 
 
-Vertex = tuple[float, float]
+Vertex = tuple[Number, Number]
 
 
 _GEOS_PROBLEM = re.compile(r"[^\[]+\[(?P<x>\S+) (?P<y>\S+)\]")
@@ -129,8 +133,8 @@ class _BlindZoneSpec(_Strict):
 
 class _MapSpec(_Strict):
     name: str
-    width: float = Field(gt=0)
-    height: float = Field(gt=0)
+    width: Number = Field(gt=0)
+    height: Number = Field(gt=0)
     obstacles: list[_ObstacleSpec] = []
     blind_zones: list[_BlindZoneSpec] = []
 
