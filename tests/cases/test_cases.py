@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 import tomli_w
 
+from hazardhunt.campaign.store import file_checksums
 from hazardhunt.cases import CaseError, regress_case
 from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
@@ -146,6 +147,36 @@ def drop(table, key):
             id="negative-seed",
         ),
         pytest.param(
+            lambda case: case["environment"].__setitem__("seed", True),
+            "environment.seed: must be a whole number, not true",
+            id="boolean-seed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("robot", {"max_speed": True}),
+            "environment.robot.max_speed: must be a number, not true",
+            id="boolean-robot-speed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("episode_duration", "30"),
+            'environment.episode_duration: must be a number, not "30"',
+            id="duration-as-text",
+        ),
+        pytest.param(
+            lambda case: case["human"]["actions"].__setitem__(2, [5.0, 0.0]),
+            "human.actions.2.0: must be less than or equal to 1",
+            id="action-beyond-full-speed",
+        ),
+        pytest.param(
+            lambda case: case["human"]["actions"].__setitem__(0, [0.0, -1.5]),
+            "human.actions.0.1: must be greater than or equal to -1",
+            id="action-beyond-full-turn",
+        ),
+        pytest.param(
+            lambda case: case["expected"].__setitem__("sim_time", -5),
+            "expected.sim_time: must be greater than or equal to 0",
+            id="negative-time",
+        ),
+        pytest.param(
             lambda case: case["expected"].__setitem__("outcome", "explode"),
             "expected.outcome: unknown outcome 'explode': use one of goal, failure",
             id="unknown-outcome",
@@ -196,6 +227,34 @@ def test_a_malformed_case_file_names_the_file_and_key(cases, tmp_path, break_cas
         regress_case(broken)
     assert str(error.value).startswith(str(broken))
     assert message in str(error.value)
+
+
+def test_actions_a_tester_recorded_beyond_the_bounds_are_exported_as_played(run, tmp_path):
+    # A searcher may hand the simulation actions outside [-1, 1] (which it clips) and they
+    # are recorded as given: the case holds them as played, and still replays the failure.
+    beyond = tmp_path / "run"
+    shutil.copytree(run, beyond)
+    failures = pd.read_parquet(beyond / "failures.parquet")
+    actions = [
+        np.asarray(list(a), dtype=np.float32).reshape(-1, 2).tolist() for a in failures["actions"]
+    ]
+    actions[0].append([5.0, -5.0])  # after the failure: never played
+    failures["actions"] = actions
+    failures.to_parquet(beyond / "failures.parquet")
+    summary = json.loads((beyond / "summary.json").read_text())
+    summary["checksums"] = file_checksums(beyond)  # as the tester's run wrote it
+    (beyond / "summary.json").write_text(json.dumps(summary))
+    out = tmp_path / "cases"
+    done = hazardhunt("export", beyond, "--out", out, "--all")
+    assert done.returncode == 0, done.stderr
+    [case] = [
+        file
+        for file in out.glob("*.toml")
+        if tomllib.loads(file.read_text())["found"]["episode"] == failures.at[0, "episode"]
+    ]
+    assert tomllib.loads(case.read_text())["human"]["actions"][-1] == [1.0, -1.0]
+    code, report = regress(case)
+    assert (code, [c["verdict"] for c in report["cases"]]) == (1, ["still fails"])
 
 
 def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):

@@ -36,7 +36,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
-from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.config import EnvOptions, Seed
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
 from hazardhunt.campaign.run import build_simulation
 from hazardhunt.campaign.store import sut_error_of
@@ -78,12 +78,12 @@ class _CaseEnvironment(EnvOptions):
     """The episode's field setting and seed, beside the run's environment options."""
 
     field: str
-    seed: int = Field(default=0, ge=0, le=2**32 - 1)
+    seed: Seed = 0
     # Required in a case, which replays with the options it was found with rather than with
     # today's defaults; EnvOptions checks their values when the options are built.
-    decision_period: float
-    episode_duration: float
-    stall_duration: float
+    decision_period: _Number
+    episode_duration: _Number
+    stall_duration: _Number
 
     def options(self) -> EnvOptions:
         """The run's environment options.
@@ -97,7 +97,7 @@ class _CaseEnvironment(EnvOptions):
 class _CaseExpected(_CaseTable):
     failure_class: str = Field(alias="class")
     outcome: str = "failure"
-    sim_time: _Number | None = None
+    sim_time: Annotated[_Number, Field(ge=0)] | None = None
     """When the failure happened, in s."""
     contact_face: str = ""
 
@@ -120,8 +120,13 @@ class _CaseSut(_CaseTable):
     safety_layer: _CasePlugin | None = None
 
 
+_Action = Annotated[float, Strict(), Field(ge=-1, le=1)]
+"""A normalised speed or turn rate: the simulation would clip one outside [-1, 1], and the
+case would replay another episode than the one it says."""
+
+
 class _CaseHuman(_CaseTable):
-    actions: list[tuple[_Number, _Number]] = Field(min_length=1)
+    actions: list[tuple[_Action, _Action]] = Field(min_length=1)
     """The human's actions, one [speed, turn] pair per decision, as the env takes them."""
 
 
