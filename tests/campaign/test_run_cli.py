@@ -204,6 +204,14 @@ def test_the_scenarios_command_draws_a_scenario_file_with_a_field_it_defines(tmp
         assert 1.4 < picture.width / picture.height < 1.8
 
 
+def test_the_scenarios_command_checks_every_name_before_drawing_any(tmp_path):
+    done = hazardhunt("scenarios", "crossing", "bogus", "--out", tmp_path / "pictures")
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert "bogus: no such scenario file" in line
+    assert not (tmp_path / "pictures").exists()
+
+
 def test_the_scenarios_command_names_the_fields_there_are(tmp_path):
     done = hazardhunt("scenarios", "crossing", "--field", "wide", "--out", tmp_path)
     assert done.returncode == 2
