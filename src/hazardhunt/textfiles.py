@@ -67,7 +67,9 @@ def format_validation_error(error: ValidationError, model: type[BaseModel] | Non
         error: What validating ``model`` (or another schema) raised.
         model: The schema validated, whose keys an unknown key is matched against.
     """
-    first = error.errors()[0]
+    found = error.errors()
+    # A misspelt key also leaves its key missing: the misspelling is the one to name.
+    first = next((p for p in found if p["type"] == "extra_forbidden"), found[0])
     # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
     location = [part for part in first["loc"] if part != "[key]"]
     key = ".".join(str(part) for part in location) or "(top level)"

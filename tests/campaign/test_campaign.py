@@ -289,6 +289,11 @@ def test_ray_records_the_same_episodes_as_local(
     [
         pytest.param("scenarios = [", "TOML", id="malformed"),
         pytest.param(GRID + "budget = 3\n", "budget", id="unknown-key"),
+        pytest.param(
+            GRID.replace("episodes =", "episods ="),
+            "episods: unknown key (did you mean episodes?) (and 1 more problem)",
+            id="misspelt-key",
+        ),
         pytest.param(GRID.replace('"head-on"', '"roundabout"'), "scenarios", id="scenario"),
         pytest.param(GRID.replace('"random"', '"greedy"'), "testers", id="tester"),
         pytest.param(GRID.replace('"2m"', '"3m"'), "fields", id="field"),
