@@ -33,6 +33,8 @@ class Scenario(_Strict):
     ("data", "message"),
     [
         ({"episods": 3}, "episods: unknown key (did you mean episodes?)"),
+        ({"seeds": [], "episods": 3},
+         "episods: unknown key (did you mean episodes?) (and 1 more problem)"),
         ({"robot": {"start": {"x": 1.0, "headng_deg": 9.0}}},
          "robot.start.headng_deg: unknown key (did you mean heading_deg?)"),
         ({"robot": {"start": {"x": 1.0}, "colour": "red"}}, "robot.colour: unknown key"),

@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from hazardhunt.campaign.records import RequirementCount, RunSummary
     from hazardhunt.campaign.replay import ReplayResult
     from hazardhunt.cases import RegressionResult
+    from hazardhunt.sim.simulation import Simulation
 
 
 class _FlagsWithoutType:
@@ -130,27 +131,24 @@ def scenarios(
 
     chosen = names or list(BUILTIN_SCENARIOS)
     check_output_location(out)
+    simulations = [_scenario_simulation(name, field, solver) for name in chosen]  # all, first
     table = Table(
         "scenario", "outcome", "sim time (s)", "min clearance (m)", "emergency stops", "picture"
     )
     rng = np.random.default_rng(seed)
     with _transient_bar(console) as progress:
         task = progress.add_task("simulating", total=len(chosen))
-        for name in chosen:
+        for name, simulation in zip(chosen, simulations, strict=True):
             progress.update(task, description=f"simulating {name}")
-            table.add_row(*_simulate_and_draw(name, field, solver, rng, out))
+            table.add_row(*_simulate_and_draw(name, simulation, field, rng, out))
             progress.advance(task)
     console.print(table)
     console.print(f"Pictures written to [bold]{out.resolve()}[/bold]")
 
 
-def _simulate_and_draw(
-    name: str, field: str, solver: str, rng: np.random.Generator, out: Path
-) -> tuple[str, ...]:
-    """One episode of scenario ``name`` with a random human, drawn into ``out``: its row of
-    the ``scenarios`` command's table."""
+def _scenario_simulation(name: str, field: str, solver: str) -> Simulation:
+    """The simulation of scenario ``name`` behind ``field``, its files and options checked."""
     from hazardhunt.campaign.config import cached_scenario, route_problem
-    from hazardhunt.env.rendering import plot_episode
     from hazardhunt.sim.simulation import Simulation
     from hazardhunt.sut.safety_layer import field_shape
     from hazardhunt.world.bodies import RobotParams
@@ -165,9 +163,18 @@ def _simulate_and_draw(
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint="--field") from None
     try:
-        simulation = Simulation.build(scenario, field, solver=solver)
+        return Simulation.build(scenario, field, solver=solver)
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint="--solver") from None
+
+
+def _simulate_and_draw(
+    name: str, simulation: Simulation, field: str, rng: np.random.Generator, out: Path
+) -> tuple[str, ...]:
+    """One episode of scenario ``name`` with a random human, drawn into ``out``: its row of
+    the ``scenarios`` command's table."""
+    from hazardhunt.env.rendering import plot_episode
+
     result = simulation.simulate(lambda _: rng.uniform(-1.0, 1.0, size=2))
     summary = result.summary
     stem = Path(name).stem
@@ -588,6 +595,11 @@ def _check_gif(gif: Path | None) -> None:
         return
     if gif.is_dir():
         raise ConfigError(f"--gif: {gif} is a folder; name a file, such as {gif / 'failure.gif'}")
+    if gif.suffix.lower() != ".gif":
+        raise ConfigError(
+            f"--gif: {gif} does not end in .gif; the animation is a GIF, such as "
+            f"{gif.with_suffix('.gif')}"
+        )
     check_output_location(gif.parent, option="--gif")
 
 

@@ -67,7 +67,9 @@ def format_validation_error(error: ValidationError, model: type[BaseModel] | Non
         error: What validating ``model`` (or another schema) raised.
         model: The schema validated, whose keys an unknown key is matched against.
     """
-    first = error.errors()[0]
+    found = error.errors()
+    # A misspelt key also leaves its key missing: the misspelling is the one to name.
+    first = next((p for p in found if p["type"] == "extra_forbidden"), found[0])
     # pydantic marks a bad dictionary key with a "[key]" part after the key itself.
     location = [part for part in first["loc"] if part != "[key]"]
     key = ".".join(str(part) for part in location) or "(top level)"
@@ -90,7 +92,7 @@ def refused_value(problem: ErrorDetails) -> str:
     if kind == "missing":
         return "missing"
     if kind in _KINDS:
-        return f"must be {_KINDS[kind]}, not {_shown(value)}"
+        return f"must be {_KINDS[kind]}, not {shown_value(value)}"
     if kind == "too_short" and (problem.get("ctx") or {}).get("min_length") == 1:
         return "must not be empty"
     message = str(problem["msg"]).removeprefix("Value error, ")
@@ -98,8 +100,8 @@ def refused_value(problem: ErrorDetails) -> str:
     return re.sub(r"^(Input|List|Tuple|String|Dictionary) should ", "must ", message)
 
 
-def _shown(value: Any) -> str:
-    """A value as a TOML file writes it, cut short."""
+def shown_value(value: Any) -> str:
+    """A value as a TOML file writes it, cut short: ``true``, ``"1.1"``, ``[1, 2]``."""
     if isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, str):
@@ -107,7 +109,7 @@ def _shown(value: Any) -> str:
     elif isinstance(value, dict):
         text = "a table"
     elif isinstance(value, list | tuple):
-        text = "[" + ", ".join(_shown(item) for item in value) + "]"
+        text = "[" + ", ".join(shown_value(item) for item in value) + "]"
     else:
         text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."

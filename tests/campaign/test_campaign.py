@@ -289,6 +289,11 @@ def test_ray_records_the_same_episodes_as_local(
     [
         pytest.param("scenarios = [", "TOML", id="malformed"),
         pytest.param(GRID + "budget = 3\n", "budget", id="unknown-key"),
+        pytest.param(
+            GRID.replace("episodes =", "episods ="),
+            "episods: unknown key (did you mean episodes?) (and 1 more problem)",
+            id="misspelt-key",
+        ),
         pytest.param(GRID.replace('"head-on"', '"roundabout"'), "scenarios", id="scenario"),
         pytest.param(GRID.replace('"random"', '"greedy"'), "testers", id="tester"),
         pytest.param(GRID.replace('"2m"', '"3m"'), "fields", id="field"),
@@ -364,6 +369,36 @@ def test_ray_records_the_same_episodes_as_local(
             GRID.replace("[0, 1]", '["0", "1"]'),
             'seeds.0: must be a whole number, not "0"',
             id="string-seeds",
+        ),
+        pytest.param(
+            GRID + "[env.robot]\nmax_speed = true\n",
+            "env.robot.max_speed: must be a number, not true",
+            id="boolean-robot-speed",
+        ),
+        pytest.param(
+            GRID + '[env.robot]\nmax_speed = "1.1"\n',
+            'env.robot.max_speed: must be a number, not "1.1"',
+            id="string-robot-speed",
+        ),
+        pytest.param(
+            GRID + "[env.robot]\nmax_sped = 1.1\n",
+            "env.robot.max_sped: unknown key (did you mean max_speed?)",
+            id="unknown-robot-key",
+        ),
+        pytest.param(
+            GRID + "[env]\ncontroller_timeout = true\n",
+            "env.controller_timeout: must be a number, not true",
+            id="boolean-timeout",
+        ),
+        pytest.param(
+            GRID + '[env]\ncontroller_timeout = "5"\n',
+            'env.controller_timeout: must be a number, not "5"',
+            id="string-timeout",
+        ),
+        pytest.param(
+            GRID.replace("[0, 1]", "[0, 5000000000]"),
+            "seeds.1: must be less than or equal to 4294967295",
+            id="seed-a-case-cannot-hold",
         ),
     ],
 )

@@ -373,6 +373,10 @@ def test_a_tester_that_plays_less_than_its_budget_fails_its_run(tmp_path):
     ("option", "value", "problem"),
     [
         ("--robot", "length=1e6", "length must be at most 10"),
+        ("--robot", "max_speed=true", "robot.max_speed: must be a number, not true"),
+        ("--robot", 'max_speed="1.1"', 'robot.max_speed: must be a number, not "1.1"'),
+        ("--robot", "bogus=1", "robot.bogus: unknown key"),
+        ("--seed", "5000000000", "seed: must be less than or equal to 4294967295"),
         ("--stall-duration", "1e-300", "stall_duration: must be greater than or equal"),
         ("--field", "3m", "unknown field '3m': use one of none, 1.25m, 2m"),
     ],
@@ -389,6 +393,20 @@ def test_values_no_robot_or_clock_can_hold_are_refused_in_one_line(
         problem in done.stderr and len(done.stderr.strip().splitlines()) == 1
     )
     assert "2m, none" not in done.stderr  # the field settings are listed once
+
+
+@pytest.mark.parametrize("value", ["true", '"1.25"'])
+def test_a_field_size_that_is_not_a_number_is_refused_not_converted(tmp_path, value):
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--episodes", 2,
+        "--out", tmp_path / "run", "--controller", PURSUIT,
+        "--safety-layer", "hazardhunt.sut.safety_layer:LaserSafetyLayer",
+        "--safety-layer-param", f"diameter={value}",
+    )  # fmt: skip
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"diameter must be a number, not {value}" in line
+    assert not (tmp_path / "run").exists()
 
 
 def test_an_out_on_a_file_system_that_cannot_hold_it_is_bad_input(tmp_path):

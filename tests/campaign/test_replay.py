@@ -102,22 +102,32 @@ def test_a_signed_record_that_does_not_replay_is_not_reproduced(run_with_failure
     assert "replayed None" not in done.stdout
 
 
-@pytest.mark.parametrize("where", ["under a file", "a folder"])
+@pytest.mark.parametrize("where", ["under a file", "a folder", "not a gif"])
 def test_a_gif_that_cannot_be_written_is_one_line_before_the_replay(
     run_with_failures, tmp_path, where
 ):
     episode = int(pd.read_parquet(run_with_failures / "failures.parquet")["episode"][0])
     (tmp_path / "notes.txt").write_text("mine")
-    gif = tmp_path / "notes.txt" / "failure.gif" if where == "under a file" else tmp_path
+    gif, expected = {
+        "under a file": (
+            tmp_path / "notes.txt" / "failure.gif",
+            f"--gif: {tmp_path / 'notes.txt'} is a file, not a directory",
+        ),
+        "a folder": (
+            tmp_path,
+            f"--gif: {tmp_path} is a folder; name a file, such as {tmp_path / 'failure.gif'}",
+        ),
+        "not a gif": (
+            tmp_path / "out.txt",
+            f"--gif: {tmp_path / 'out.txt'} does not end in .gif; the animation is a GIF, such "
+            f"as {tmp_path / 'out.gif'}",
+        ),
+    }[where]
     done = hazardhunt("replay", run_with_failures, "--episode", episode, "--gif", gif)
     assert done.returncode == 2
     assert done.stdout == ""  # refused before replaying
-    expected = (
-        f"--gif: {tmp_path / 'notes.txt'} is a file, not a directory"
-        if where == "under a file"
-        else f"--gif: {tmp_path} is a folder; name a file, such as {tmp_path / 'failure.gif'}"
-    )
     assert done.stderr.strip().splitlines() == [f"error: {expected}"]
+    assert not (tmp_path / "out.txt").exists()
 
 
 def test_an_unfinished_run_is_a_clear_error(run_with_failures, tmp_path):

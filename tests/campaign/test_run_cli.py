@@ -215,6 +215,14 @@ def test_the_scenarios_command_draws_a_scenario_file_with_a_field_it_defines(tmp
         assert 1.4 < picture.width / picture.height < 1.8
 
 
+def test_the_scenarios_command_checks_every_name_before_drawing_any(tmp_path):
+    done = hazardhunt("scenarios", "crossing", "bogus", "--out", tmp_path / "pictures")
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert "bogus: no such scenario file" in line
+    assert not (tmp_path / "pictures").exists()
+
+
 def test_the_scenarios_command_names_the_fields_there_are(tmp_path):
     done = hazardhunt("scenarios", "crossing", "--field", "wide", "--out", tmp_path)
     assert done.returncode == 2
@@ -256,6 +264,11 @@ start = {{ x = 10.0, y = 5.0, heading_deg = 90.0 }}
             ("x = 10.0, y = 5.0", "x = 2.3, y = 10.2"),
             "human.start: (2.3, 10.2) touches the robot at its start: every episode would begin",
             id="human-touching-the-robot",
+        ),
+        pytest.param(
+            ("x = 10.0, y = 5.0", "x = 8.6, y = 7.0"),
+            "human.start: (8.6, 7) overlaps an obstacle (the human is a disc of radius 0.25 m)",
+            id="human-overlapping-a-shelf",
         ),
         pytest.param(
             ("[human]", "[fields.wide]\ndiameter = inf\n[human]"),

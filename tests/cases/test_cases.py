@@ -1,6 +1,7 @@
 """Failures as regression cases: export from a run, re-run against the same and a changed SUT."""
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import pandas as pd
 import pytest
 import tomli_w
 
+from hazardhunt.campaign.store import file_checksums
 from hazardhunt.cases import CaseError, regress_case
 from tests.helpers import hazardhunt, hostile_plugin, marker_module
 
@@ -91,11 +93,16 @@ def test_a_broken_case_file_names_the_file_and_key(cases, tmp_path):
     text = next(cases.glob("*.toml")).read_text()
     broken = tmp_path / "broken.toml"
     broken.write_text(text.replace("decision_period = ", "decision_periods = "))
-    with pytest.raises(CaseError, match=r"broken.toml: environment.decision_period: missing"):
+    # The misspelt key first: it is what the user wrote, and says what was meant.
+    named = (
+        "broken.toml: environment.decision_periods: unknown key (did you mean "
+        "decision_period?) (and 1 more problem)"
+    )
+    with pytest.raises(CaseError, match=re.escape(named)):
         regress_case(broken)
     done = hazardhunt("regress", broken)
     assert done.returncode == 2
-    assert "broken.toml: environment.decision_period: missing" in done.stderr
+    assert named in " ".join(done.stderr.split())
 
 
 def test_a_case_file_that_is_not_text_is_a_clear_error(tmp_path):
@@ -144,6 +151,26 @@ def drop(table, key):
             lambda case: case["environment"].__setitem__("seed", -4),
             "environment.seed: must be greater than or equal to 0",
             id="negative-seed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("seed", True),
+            "environment.seed: must be a whole number, not true",
+            id="boolean-seed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("robot", {"max_speed": True}),
+            "environment.robot.max_speed: must be a number, not true",
+            id="boolean-robot-speed",
+        ),
+        pytest.param(
+            lambda case: case["environment"].__setitem__("episode_duration", "30"),
+            'environment.episode_duration: must be a number, not "30"',
+            id="duration-as-text",
+        ),
+        pytest.param(
+            lambda case: case["expected"].__setitem__("sim_time", -5),
+            "expected.sim_time: must be greater than or equal to 0",
+            id="negative-time",
         ),
         pytest.param(
             lambda case: case["expected"].__setitem__("outcome", "explode"),
@@ -196,6 +223,49 @@ def test_a_malformed_case_file_names_the_file_and_key(cases, tmp_path, break_cas
         regress_case(broken)
     assert str(error.value).startswith(str(broken))
     assert message in str(error.value)
+
+
+def test_actions_a_tester_recorded_beyond_the_bounds_are_exported_as_played(run, tmp_path):
+    # A searcher may hand the simulation actions outside [-1, 1] (which it clips) and they
+    # are recorded as given: the case holds them as played, and still replays the failure.
+    beyond = tmp_path / "run"
+    shutil.copytree(run, beyond)
+    failures = pd.read_parquet(beyond / "failures.parquet")
+    actions = [
+        np.asarray(list(a), dtype=np.float32).reshape(-1, 2).tolist() for a in failures["actions"]
+    ]
+    actions[0].append([5.0, -5.0])  # after the failure: never played
+    failures["actions"] = actions
+    failures.to_parquet(beyond / "failures.parquet")
+    summary = json.loads((beyond / "summary.json").read_text())
+    summary["checksums"] = file_checksums(beyond)  # as the tester's run wrote it
+    (beyond / "summary.json").write_text(json.dumps(summary))
+    out = tmp_path / "cases"
+    done = hazardhunt("export", beyond, "--out", out, "--all")
+    assert done.returncode == 0, done.stderr
+    [case] = [
+        file
+        for file in out.glob("*.toml")
+        if tomllib.loads(file.read_text())["found"]["episode"] == failures.at[0, "episode"]
+    ]
+    assert tomllib.loads(case.read_text())["human"]["actions"][-1] == [1.0, -1.0]
+    code, report = regress(case)
+    assert (code, [c["verdict"] for c in report["cases"]]) == (1, ["still fails"])
+
+
+def test_a_case_with_actions_beyond_the_bounds_is_played_clipped_and_says_so(cases, tmp_path):
+    # As cases exported before export clipped them hold, or as a hand edit could make them.
+    case = tomllib.loads(sorted(cases.glob("*.toml"))[0].read_text())
+    case["human"]["actions"][2] = [5.0, 0.0]
+    case["human"]["actions"][0] = [0.0, -1.5]
+    edited = tmp_path / "edited.toml"
+    edited.write_text(tomli_w.dumps(case))
+    done = hazardhunt("regress", edited, "--json", "--trust-plugins", cwd=EXAMPLE)
+    assert done.returncode in (0, 1), done.stderr  # played, whatever it does now
+    assert (
+        f"warning: {edited}: human.actions.0.1 (-1.5) and 1 more lie outside [-1, 1]: played "
+        "clipped to it, as every action is"
+    ) in " ".join(done.stderr.split())
 
 
 def test_the_pytest_module_fails_while_the_cases_still_fail(run, tmp_path):

@@ -79,6 +79,39 @@ def test_a_model_file_without_places_for_the_floor_is_refused(tmp_path):
         WalkerModel(walker_simulation().scenario, path)
 
 
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        pytest.param(
+            lambda text: "behaviour = 5\n" + text[text.index("[walking]") :],
+            "behaviour: must be a table, not 5",
+            id="behaviour-a-number",
+        ),
+        pytest.param(
+            lambda text: "places = { shopfloor = 3 }\n" + text[: text.index("[[places")],
+            "places.shopfloor: must be a list of places ([[places.shopfloor]]), not 3",
+            id="places-a-number",
+        ),
+        pytest.param(
+            lambda text: text.replace("weight = 1.0", "weight = -1.0", 1),
+            "places.shopfloor[0].weight: must be a number >= 0, not -1.0",
+            id="negative-weight",
+        ),
+    ],
+)
+def test_a_model_file_of_the_wrong_shape_names_the_file_and_the_key(tmp_path, change, says):
+    path = tmp_path / "people.toml"
+    path.write_text(change((ROOT / "src/hazardhunt/likelihood/people.toml").read_text()))
+    done = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--people", path, "--out", tmp_path / "estimate", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"{path}: {says}" in line
+    assert not (tmp_path / "estimate").exists()
+
+
 class Elsewhere(Dimension):
     """Draws from [0, 1], scores as if it drew from [2, 3]."""
 

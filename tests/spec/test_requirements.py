@@ -101,6 +101,57 @@ def test_a_formula_that_cannot_be_monitored_names_file_requirement_and_position(
     assert "\n" not in message
 
 
+@pytest.mark.parametrize(
+    ("formula", "says"),
+    [
+        (
+            "eventually[0:1e9](clearance >= 1)",
+            "formula: the time bound 1e+09 s of 'eventually' is longer than the longest "
+            "episode (3600 s)",
+        ),
+        (
+            "always(clearance >= 1 or once[0:4000000ms](robot_speed < 1))",
+            "formula: the time bound 4e+06ms of 'once' is longer than the longest episode",
+        ),
+        (
+            "not " * 30 + "clearance >= 1",
+            "formula: 30 negations ('not', '!'), at most 12",
+        ),
+    ],
+)
+def test_a_formula_too_costly_to_monitor_is_refused_when_read(tmp_path, formula, says):
+    path = tmp_path / "mine.toml"
+    path.write_text(f'[requirements.gap]\nformula = "{formula}"\n')
+    with pytest.raises(RequirementError) as raised:
+        load_requirements(path)
+    assert str(raised.value).startswith(f"{path}: requirement 'gap': {says}")
+
+
+def test_a_formula_bounded_by_the_longest_episode_is_read():
+    assert StlRequirement("long", "eventually[0:3600](goal_distance <= 0.3)").formula
+
+
+@pytest.mark.parametrize(
+    ("content", "says"),
+    [
+        (b"x = " + b"[" * 100_000, "not valid TOML: arrays or tables nested too deeply"),
+        (b'[requirements.a]\nformula = "always(clearance >= 1)"\ndescription = "\xff"\n',
+         "not a text file"),
+    ],
+)  # fmt: skip
+def test_a_requirements_file_that_cannot_be_read_is_one_line_naming_it(tmp_path, content, says):
+    path = tmp_path / "mine.toml"
+    path.write_bytes(content)
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "2m", "--episodes", 2,
+        "--out", tmp_path / "run", "--requirement", path, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert f"{path}: {says}" in line
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_requirements_file_with_unknown_keys_or_names_is_refused(tmp_path):
     path = tmp_path / "mine.toml"
     path.write_text('[requirements.gap]\nformula = "always(clearance >= 1)"\nlevel = 3\n')

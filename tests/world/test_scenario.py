@@ -58,6 +58,7 @@ def test_a_user_scenario_file_loads(tmp_path):
         (('name = "mine"', 'name = "mine"\ncolour = "red"'), "colour"),
         (("[human]", "[humans]"), "human"),
         (("x = 10.0, y = 5.0", "x = 5.0, y = 3.0"), "human.start: (5, 3) lies inside an obstacle"),
+        (("x = 10.0, y = 5.0", "x = 8.6, y = 7.0"), "human.start: (8.6, 7) overlaps an obstacle"),
         (("x = 18.0, y = 10.0", "x = 25.0, y = 10.0"), "robot.goal: (25, 10) lies off"),
         (("name = ", "name = = "), "not valid TOML"),
         (
@@ -65,6 +66,8 @@ def test_a_user_scenario_file_loads(tmp_path):
             "human.start.heading_deg: must be a finite",
         ),
         (("x = 2.0, y = 10.0", "x = -inf, y = 10.0"), "robot.start.x: must be a finite"),
+        (("x = 10.0, y = 5.0", "x = true, y = 5.0"), "human.start.x: must be a number, not true"),
+        (("x = 10.0, y = 5.0", 'x = "10", y = 5.0'), 'human.start.x: must be a number, not "10"'),
     ],
 )
 def test_bad_scenario_files_name_the_file_and_the_field(tmp_path, change, expected):
@@ -179,3 +182,12 @@ def test_a_scenario_keeps_its_field_tables_for_the_safety_layer(tmp_path):
     text = VALID + "[fields.sides]\ndiameter = 1.25\nside_margin = 0.4\n"
     scenario = load_scenario(write(tmp_path, text))
     assert scenario.fields == {"sides": {"diameter": 1.25, "side_margin": 0.4}}
+
+
+def test_a_human_whose_body_reaches_off_the_floor_is_refused(tmp_path):
+    # The centre lies on a floor without walls, the disc around it does not.
+    path = map_file(tmp_path, "obstacles", "[[15, 15], [16, 15], [16, 16]]")
+    path.write_text(path.read_text().replace("x = 10.0, y = 5.0", "x = 0.1, y = 5.0"))
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(path)
+    assert f"{path}: human.start: (0.1, 5) lies too near the edge of the floor" in str(caught.value)

@@ -7,6 +7,8 @@ a bad campaign file is one error naming its key.
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import functools
 import itertools
 import os
@@ -40,14 +42,14 @@ from hazardhunt.campaign.plugins import (
 )
 from hazardhunt.errors import InputError
 from hazardhunt.sim.simulation import SimulationSettings, decisions_in, whole_multiple
-from hazardhunt.spec.outcomes import TerminationParams
+from hazardhunt.spec.outcomes import MAX_EPISODE_DURATION, TerminationParams
 from hazardhunt.spec.requirements import requirements_of
 from hazardhunt.sut.plugins import PluginError
 from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
-from hazardhunt.textfiles import format_validation_error, loads_toml
+from hazardhunt.textfiles import format_validation_error, loads_toml, shown_value
 from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.geometry import point_rectangle_clearance, to_body_frame
 from hazardhunt.world.scenario import (
@@ -75,13 +77,17 @@ class _Strict(BaseModel):
 Seconds = Annotated[float, Strict(), Field(gt=0)]
 """A positive, finite time in s: an int or a float, not a string or a boolean."""
 
-MAX_EPISODE_DURATION = 3600.0
-"""The longest episode, in s of simulated time."""
 MIN_STALL_DURATION = 0.05
 """The shortest stall limit, in s: one physics step."""
 MAX_CONTROLLER_TIMEOUT = 86_400.0
 """The longest time limit on one call of a plug-in, in s (a day): the timer cannot hold much
 more."""
+
+MAX_SEED = 2**32 - 1
+"""The largest seed: a regression case stores an episode's seed, which NumPy and the
+environment take up to this."""
+Seed = Annotated[StrictInt, Field(ge=0, le=MAX_SEED)]
+"""A run's seed: a whole number from 0 to :data:`MAX_SEED`."""
 
 SutErrorLimit = Annotated[float, Strict(), Field(gt=0, le=1)]
 """The share of a run's episodes that, once they have ended in ``sut_error``, fails the run: a
@@ -103,7 +109,7 @@ class EnvOptions(_Strict):
         float, Strict(), Field(ge=MIN_STALL_DURATION, le=MAX_EPISODE_DURATION)
     ] = 10.0
     """Continuous emergency-stop time after which an episode stalls, in s."""
-    controller_timeout: float | None = Field(
+    controller_timeout: Annotated[float, Strict()] | None = Field(
         default=None, gt=0, le=MAX_CONTROLLER_TIMEOUT, allow_inf_nan=False
     )
     """Wall-clock limit on each call of the controller, in s (at most a day): a call that
@@ -112,6 +118,22 @@ class EnvOptions(_Strict):
     robot: RobotParams = RobotParams()
     """The robot's size and limits (``[env.robot]``: length, width, max_speed, ...); the
     controller receives them in ``reset``."""
+
+    @field_validator("robot", mode="before")
+    @classmethod
+    def _robot_numbers(cls, value: Any) -> Any:
+        # pydantic would turn true into 1.0 and "1.1" into 1.1 on their way to RobotParams.
+        if not isinstance(value, dict):
+            return value
+        known = [field.name for field in dataclasses.fields(RobotParams)]
+        for key, item in value.items():
+            if key not in known:
+                close = difflib.get_close_matches(str(key), known, n=1)
+                hint = f" (did you mean {close[0]}?)" if close else ""
+                raise invalid((key,), f"unknown key{hint}", item)
+            if isinstance(item, bool) or not isinstance(item, int | float):
+                raise invalid((key,), f"must be a number, not {shown_value(item)}", item)
+        return value
 
     def settings(self) -> SimulationSettings:
         """These options as the simulation's settings (the others at their defaults)."""
@@ -316,7 +338,7 @@ class RunConfig(_Strict):
     """A user's tester, whose name ``tester`` is; None for a registered tester."""
     tester: str = Field(min_length=1)
     """The search method: a registered tester (``TESTERS``) or the name of a user's."""
-    seed: StrictInt = Field(ge=0)
+    seed: Seed
     """Seeds every random choice of the run."""
     episodes: StrictInt = Field(gt=0)
     """Budget: number of episodes."""
@@ -401,7 +423,7 @@ class CampaignConfig(_Strict):
     """Users' testers by name (in a campaign file, a ``[tester.NAME]`` table with a ``path``)."""
     testers: list[str] = Field(min_length=1)
     """Registered testers and names of ``tester_plugins``."""
-    seeds: list[StrictInt] = Field(min_length=1)
+    seeds: list[Seed] = Field(min_length=1)
     episodes: StrictInt = Field(gt=0)
     env: EnvOptions = EnvOptions()
     tester: dict[str, dict[str, Any]] = {}

@@ -164,7 +164,8 @@ def _episode_case(
         spec: PluginSpec | None = getattr(config, key)
         if spec is not None:
             sut[key] = _plugin_table(spec)
-    actions = np.asarray(list(row["actions"]), dtype=np.float32).reshape(-1, 2)
+    # As played: the simulation clips each action to [-1, 1], which a case file must hold.
+    actions = np.clip(np.asarray(list(row["actions"]), dtype=np.float32).reshape(-1, 2), -1, 1)
     return {
         "format": CASE_FORMAT,
         # The run id comes from a run's files, which anyone may have made: one safe file name.

@@ -28,6 +28,7 @@ must be named again (``--controller``, ``--safety-layer``) or the case's plug-in
 from __future__ import annotations
 
 import sys
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +37,7 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
-from hazardhunt.campaign.config import EnvOptions
+from hazardhunt.campaign.config import EnvOptions, Seed
 from hazardhunt.campaign.plugins import PluginSpec, allowed_plugin, make_classifier
 from hazardhunt.campaign.simulations import build_simulation
 from hazardhunt.campaign.store import sut_error_of
@@ -78,12 +79,12 @@ class _CaseEnvironment(EnvOptions):
     """The episode's field setting and seed, beside the run's environment options."""
 
     field: str
-    seed: int = Field(default=0, ge=0, le=2**32 - 1)
+    seed: Seed = 0
     # Required in a case, which replays with the options it was found with rather than with
     # today's defaults; EnvOptions checks their values when the options are built.
-    decision_period: float
-    episode_duration: float
-    stall_duration: float
+    decision_period: _Number
+    episode_duration: _Number
+    stall_duration: _Number
 
     def options(self) -> EnvOptions:
         """The run's environment options.
@@ -97,7 +98,7 @@ class _CaseEnvironment(EnvOptions):
 class _CaseExpected(_CaseTable):
     failure_class: str = Field(alias="class")
     outcome: str = "failure"
-    sim_time: _Number | None = None
+    sim_time: Annotated[_Number, Field(ge=0)] | None = None
     """When the failure happened, in s."""
     contact_face: str = ""
 
@@ -120,8 +121,13 @@ class _CaseSut(_CaseTable):
     safety_layer: _CasePlugin | None = None
 
 
+_Action = Annotated[float, Strict()]
+"""A normalised speed or turn rate; one outside [-1, 1] is played clipped, with a warning
+(:func:`_played_actions`)."""
+
+
 class _CaseHuman(_CaseTable):
-    actions: list[tuple[_Number, _Number]] = Field(min_length=1)
+    actions: list[tuple[_Action, _Action]] = Field(min_length=1)
     """The human's actions, one [speed, turn] pair per decision, as the env takes them."""
 
 
@@ -241,8 +247,7 @@ def regress_case(
         raise CaseError(f"{path}: environment: {error}") from None
     if case.requirement is not None:
         simulation.requirements = (_requirement_of(path, case.requirement, simulation),)
-    actions = np.asarray(case.human.actions, dtype=np.float32).reshape(-1, 2)
-    result = simulation.simulate(actions)
+    result = simulation.simulate(_played_actions(path, case))
     outcome = result.outcome or "unfinished"
     failure_class = _class_of(case, result, own_classifier, simulation)
     expected = case.expected.failure_class
@@ -260,6 +265,24 @@ def regress_case(
         first = result.verdicts[case.requirement.name].time  # the violation's first instant
         at = at if first is None else first
     return RegressionResult(path.name, expected, outcome, failure_class, at, verdict, sut_error)
+
+
+def _played_actions(path: Path, case: _Case) -> np.ndarray:
+    """The case's actions; one outside [-1, 1] (the simulation clips it) is named in a warning:
+    a case exported before export clipped them holds the values a searcher gave, played
+    clipped as the episode was, while a hand-edited one may not mean what is played."""
+    actions = np.asarray(case.human.actions, dtype=np.float32).reshape(-1, 2)
+    outside = np.argwhere(np.abs(actions) > 1.0)
+    if len(outside):
+        decision, number = (int(i) for i in outside[0])
+        more = f" and {len(outside) - 1} more" if len(outside) > 1 else ""
+        warnings.warn(
+            f"{path}: human.actions.{decision}.{number} ({actions[decision, number]:g}){more} "
+            "lie outside [-1, 1]: played clipped to it, as every action is",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return actions
 
 
 def _options(path: Path, case: _Case, controller_timeout: float | None) -> EnvOptions:

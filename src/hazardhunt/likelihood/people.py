@@ -41,6 +41,7 @@ from hazardhunt.sim.simulation import Action, Policy, Simulation
 from hazardhunt.sut.plugins import build
 from hazardhunt.textfiles import TOMLDecodeError, loads_toml
 from hazardhunt.world.bodies import HumanParams
+from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import point_rectangle_clearance
 from hazardhunt.world.scenario import Scenario
 
@@ -153,6 +154,8 @@ class WalkerModel:
         if unknown:
             raise ModelError(f"{where}: unknown table(s) {', '.join(unknown)}")
         behaviour = data.get("behaviour", {})
+        if not isinstance(behaviour, Mapping):
+            raise ModelError(f"{where}: behaviour: must be a table, not {behaviour!r}")
         wanted = {"speed", "start_delay", "pauses", "pause_after", "pause_duration", "looks"}
         if missing := sorted(wanted - set(behaviour)):
             raise ModelError(f"{where}: behaviour: missing {', '.join(missing)}")
@@ -202,25 +205,37 @@ def _walking(where: str, table: Any) -> Walking:
 
 def _places(where: str, scenario: Scenario, table: Any) -> list[tuple[Place, float]]:
     floor = scenario.floor
-    entries = table.get(floor.name) if isinstance(table, Mapping) else None
+    if not isinstance(table, Mapping):
+        raise ModelError(f"{where}: places: must be a table, not {table!r}")
+    entries = table.get(floor.name)
     if not entries:
         raise ModelError(
             f"{where}: no [[places.{floor.name}]] for the floor of scenario {scenario.name!r}: "
             "write a model file with the places people walk to on it (docs/risk.md)"
         )
-    places = []
-    for index, entry in enumerate(entries):
-        at = f"{where}: places.{floor.name}[{index}]"
-        if not isinstance(entry, Mapping) or set(entry) != {"name", "x", "y", "weight"}:
-            raise ModelError(f"{at}: must have exactly name, x, y and weight")
-        x, y, weight = entry["x"], entry["y"], entry["weight"]
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (x, y, weight)):
-            raise ModelError(f"{at}: x, y and weight must be numbers")
-        point = np.array([float(x), float(y)])
-        if not floor.on_floor(point) or floor.inside_obstacle(point):
-            raise ModelError(f"{at}: ({x}, {y}) is not on the free floor")
-        places.append((Place(str(entry["name"]), float(x), float(y)), float(weight)))
+    if not isinstance(entries, list):
+        raise ModelError(
+            f"{where}: places.{floor.name}: must be a list of places ([[places.{floor.name}]]), "
+            f"not {entries!r}"
+        )
+    places = [_place(f"{where}: places.{floor.name}[{i}]", floor, e) for i, e in enumerate(entries)]
+    if not any(weight > 0 for _, weight in places):
+        raise ModelError(f"{where}: places.{floor.name}: the weights must not all be 0")
     return places
+
+
+def _place(at: str, floor: FloorMap, entry: Any) -> tuple[Place, float]:
+    if not isinstance(entry, Mapping) or set(entry) != {"name", "x", "y", "weight"}:
+        raise ModelError(f"{at}: must have exactly name, x, y and weight")
+    x, y, weight = entry["x"], entry["y"], entry["weight"]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (x, y, weight)):
+        raise ModelError(f"{at}: x, y and weight must be numbers")
+    point = np.array([float(x), float(y)])
+    if not floor.on_floor(point) or floor.inside_obstacle(point):
+        raise ModelError(f"{at}: ({x}, {y}) is not on the free floor")
+    if not (math.isfinite(weight) and weight >= 0):
+        raise ModelError(f"{at}.weight: must be a number >= 0, not {weight!r}")
+    return Place(str(entry["name"]), float(x), float(y)), float(weight)
 
 
 class WalkerPolicy:

@@ -26,6 +26,10 @@ class Outcome(str, Enum):
     safety layer that raised, returned something unusable or outlasted its time limit."""
 
 
+MAX_EPISODE_DURATION = 3600.0
+"""The longest episode, in s of simulated time."""
+
+
 @dataclass(frozen=True)
 class TerminationParams:
     """When an episode ends."""

@@ -13,7 +13,9 @@ with ``formula``, ``description`` and ``source``), monitored by ``rtamt`` in dis
 with the control period as its sampling period (time bounds such as ``eventually[0:20]`` are
 in seconds). hazardhunt ships a library of them (``requirements.toml`` beside this module).
 A formula that does not parse or names an unknown signal is refused when it is read, with
-the file, the requirement and the position in the formula.
+the file, the requirement and the position in the formula; so is a time bound longer than the
+longest episode (:data:`~hazardhunt.spec.outcomes.MAX_EPISODE_DURATION`), which rtamt would
+monitor with a buffer of that many samples.
 """
 
 from __future__ import annotations
@@ -28,11 +30,12 @@ from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-import tomllib
 from numpy.typing import NDArray
 
 from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import TrajectorySample
+from hazardhunt.spec.outcomes import MAX_EPISODE_DURATION
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml
 
 LIBRARY = Path(__file__).with_name("requirements.toml")
 """hazardhunt's named requirements for the shop floor."""
@@ -190,6 +193,13 @@ def _signals_named(formula: str, place: str) -> tuple[str, ...]:
     return tuple(found)
 
 
+MAX_NEGATIONS = 12
+"""The most negations a formula may hold: rtamt parses 20 nested ones in a second, 30 in
+many minutes."""
+
+_NEGATION = re.compile(r"(?<![\w.])not(?!\w)|!(?!=)")
+
+
 def _parsed(formula: str, signals: Sequence[str], period: float, place: str) -> Any:
     """rtamt's monitor of ``formula``."""
     with warnings.catch_warnings():  # its parser's imports use typing.io
@@ -198,6 +208,12 @@ def _parsed(formula: str, signals: Sequence[str], period: float, place: str) -> 
             StlDiscreteTimeOfflineSpecification,
         )
 
+    negations = len(_NEGATION.findall(formula))
+    if negations > MAX_NEGATIONS:
+        raise RequirementError(
+            f"{place}: formula: {negations} negations ('not', '!'), at most {MAX_NEGATIONS} "
+            "(rtamt's parser takes twice as long with each nested one)"
+        )
     spec = StlDiscreteTimeOfflineSpecification()  # offline: it explains its violations
     for name in signals:
         spec.declare_var(name, "float")
@@ -212,7 +228,32 @@ def _parsed(formula: str, signals: Sequence[str], period: float, place: str) -> 
         raise RequirementError(f"{place}: {_parse_message(error)}") from None
     finally:
         quiet.setLevel(level)
+    for node in spec.ast.specs:
+        _check_time_bounds(node, place)
     return spec
+
+
+_SECONDS_PER_UNIT = {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+"""rtamt's time units (a bound without one is in s, the unit of the sampling period)."""
+
+
+def _check_time_bounds(node: Any, place: str) -> None:
+    """Refuse a time bound of ``node`` or below it longer than the longest episode: rtamt
+    keeps a buffer of the bound's samples per operator (``[0:1e9]`` runs out of memory)."""
+    for bound in ("begin", "end"):
+        value = getattr(node, bound, None)
+        if value is None:
+            continue
+        unit = str(getattr(node, f"{bound}_unit", "") or "")
+        seconds = float(value) * _SECONDS_PER_UNIT.get(unit, 1.0)
+        if seconds > MAX_EPISODE_DURATION:
+            operator = type(node).__name__.removeprefix("Timed").lower()
+            raise RequirementError(
+                f"{place}: formula: the time bound {float(value):g}{unit or ' s'} of "
+                f"{operator!r} is longer than the longest episode ({MAX_EPISODE_DURATION:g} s)"
+            )
+    for child in node.children:
+        _check_time_bounds(child, place)
 
 
 def _parse_message(error: Exception) -> str:
@@ -233,10 +274,12 @@ def load_requirements(path: Path, sampling_period: float = 0.2) -> tuple[StlRequ
             table, or a requirement is malformed.
     """
     try:
-        data = tomllib.loads(path.read_text())
+        data = loads_toml(path.read_text(encoding="utf-8"))
     except OSError as error:
         raise RequirementError(f"{path}: cannot be read: {error.strerror or error}") from None
-    except tomllib.TOMLDecodeError as error:
+    except UnicodeDecodeError as error:
+        raise RequirementError(f"{path}: not a text file: {error.reason}") from None
+    except TOMLDecodeError as error:
         raise RequirementError(f"{path}: not valid TOML: {error}") from None
     tables = data.get("requirements")
     if not isinstance(tables, dict) or not tables:

@@ -20,6 +20,7 @@ from typing import Any
 
 from hazardhunt.errors import InputError
 from hazardhunt.sut.protocols import FloatArray, SafetyStatus
+from hazardhunt.textfiles import shown_value
 from hazardhunt.world.bodies import RobotParams, RobotState
 from hazardhunt.world.geometry import (
     point_half_disc_distance,
@@ -52,6 +53,12 @@ class FieldShape:
     the study, brakes in the physics step the field is violated."""
 
     def __post_init__(self) -> None:
+        for key, value in vars(self).items():
+            # A plug-in's parameters come as written: true is no diameter of 1 m.
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int | float)
+            ):
+                raise FieldShapeError(key, f"must be a number, not {shown_value(value)}")
         diameter, side_margin, response_time = self.diameter, self.side_margin, self.response_time
         if diameter is not None and not (math.isfinite(diameter) and diameter > 0):
             raise FieldShapeError("diameter", f"must be a positive number of m, not {diameter!r}")

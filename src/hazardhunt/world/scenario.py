@@ -17,12 +17,13 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
 from hazardhunt.errors import InputError
 from hazardhunt.textfiles import format_validation_error, loads_toml
+from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
 
@@ -80,16 +81,20 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
+Number = Annotated[float, Strict()]
+"""An int or a float: a file's ``true`` or ``"10"`` is refused, not read as 1 or 10."""
+
+
 class _PointSpec(_Strict):
-    x: float
-    y: float
+    x: Number
+    y: Number
 
 
 class _PoseSpec(_PointSpec):
-    heading_deg: float = 0.0
+    heading_deg: Number = 0.0
 
 
-Vertex = tuple[float, float]
+Vertex = tuple[Number, Number]
 
 
 _GEOS_PROBLEM = re.compile(r"[^\[]+\[(?P<x>\S+) (?P<y>\S+)\]")
@@ -128,8 +133,8 @@ class _BlindZoneSpec(_Strict):
 
 class _MapSpec(_Strict):
     name: str
-    width: float = Field(gt=0)
-    height: float = Field(gt=0)
+    width: Number = Field(gt=0)
+    height: Number = Field(gt=0)
     obstacles: list[_ObstacleSpec] = []
     blind_zones: list[_BlindZoneSpec] = []
 
@@ -269,6 +274,20 @@ def _check_placement(scenario: Scenario, path: Path) -> None:
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
             )
+    _check_human_body(floor, scenario.human_start.position, path)
+
+
+def _check_human_body(floor: FloorMap, point: FloatArray, path: Path) -> None:
+    # A human whose disc starts on a wall or a shelf can never move: every episode would be
+    # played without one.
+    radius = HumanParams().radius
+    x, y = float(point[0]), float(point[1])
+    where = f"{path}: human.start: ({x:g}, {y:g})"
+    body = f"the human is a disc of radius {radius:g} m"
+    if not (radius <= x <= floor.width - radius and radius <= y <= floor.height - radius):
+        raise ScenarioError(f"{where} lies too near the edge of the floor ({body})")
+    if floor.disc_blocked_at(x, y, radius):
+        raise ScenarioError(f"{where} overlaps an obstacle ({body})")
 
 
 def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
