@@ -747,7 +747,10 @@ def export(
     cases = "1 case" if len(written) == 1 else f"{len(written)} cases"
     console.print(f"{cases} written to [bold]{out.resolve()}[/bold]")
     if not written:
-        console.print("the results hold no failure")
+        from hazardhunt.analysis.results import failed_runs
+
+        held = "the runs that completed hold" if failed_runs(directory) else "the results hold"
+        console.print(f"{held} no failure")
     if pytest_module:
         module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
         console.print(f"pytest module written to [bold]{module}[/bold]")

@@ -111,6 +111,7 @@ def test_an_export_names_the_failed_run_and_exits_1(one_failed, tmp_path):
     done = hazardhunt("export", results, "--out", tmp_path / "cases")
     assert done.returncode == 1
     assert "0 cases written" in done.stdout
+    assert "the runs that completed hold no failure" in done.stdout  # not "the results"
     assert LOST in done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("error: 1 run of the campaign failed, so the cases cover only the runs")

@@ -395,17 +395,18 @@ def test_values_no_robot_or_clock_can_hold_are_refused_in_one_line(
     assert "2m, none" not in done.stderr  # the field settings are listed once
 
 
+@pytest.mark.parametrize("key", ["diameter", "standstill_speed"])
 @pytest.mark.parametrize("value", ["true", '"1.25"'])
-def test_a_field_size_that_is_not_a_number_is_refused_not_converted(tmp_path, value):
+def test_a_field_size_that_is_not_a_number_is_refused_not_converted(tmp_path, key, value):
     done = hazardhunt(
         "run", "--scenario", "head-on", "--field", "none", "--episodes", 2,
         "--out", tmp_path / "run", "--controller", PURSUIT,
         "--safety-layer", "hazardhunt.sut.safety_layer:LaserSafetyLayer",
-        "--safety-layer-param", f"diameter={value}",
+        "--safety-layer-param", f"{key}={value}",
     )  # fmt: skip
     assert done.returncode == 2
     [line] = done.stderr.strip().splitlines()
-    assert f"diameter must be a number, not {value}" in line
+    assert f"{key} must be a number, not {value}" in line
     assert not (tmp_path / "run").exists()
 
 

@@ -153,9 +153,15 @@ class LaserSafetyLayer:
             restart rule, in m/s.
 
         Raises:
-            ValueError: A negative or non-finite size.
+            ValueError: A negative or non-finite size or speed.
         """
         self.field = FieldShape(diameter, side_margin, response_time)
+        if isinstance(standstill_speed, bool) or not isinstance(standstill_speed, int | float):
+            raise FieldShapeError(
+                "standstill_speed", f"must be a number, not {shown_value(standstill_speed)}"
+            )
+        if not (math.isfinite(standstill_speed) and standstill_speed >= 0):
+            raise FieldShapeError("standstill_speed", f"must be >= 0 m/s, not {standstill_speed!r}")
         self.robot = robot
         self.standstill_speed = standstill_speed
         self._emergency_stop = False
