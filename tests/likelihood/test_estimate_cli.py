@@ -8,6 +8,8 @@ import subprocess
 import sys
 import time
 
+import pandas as pd
+
 from tests.helpers import hazardhunt
 
 FAST_SUT = ["--controller", "hazardhunt.benchmark.conservative:ConservativeController"]
@@ -61,7 +63,7 @@ class HangsInItsFirstEpisode(ConservativeController):
         super().reset(*args)
 
     def control(self, time_s, robot, human):
-        if self.episodes == 2 and time_s >= 1.0:  # the trial episode is the first
+        if self.episodes == 1 and time_s >= 1.0:  # the trial episode plays on another
             time.sleep(30)
         return super().control(time_s, robot, human)
 """
@@ -78,6 +80,9 @@ def test_a_controller_that_hangs_is_one_sut_error_within_the_limit_given(tmp_pat
     assert done.returncode == 0, done.stderr
     estimate = json.loads((out / "estimate.json").read_text())
     assert (estimate["episodes"], estimate["sut_errors"]) == (100, 1)
+    # The controller's first episode is the estimate's first, as in a worker process of its own.
+    played = pd.concat(pd.read_parquet(batch) for batch in sorted(out.glob("batches/*.parquet")))
+    assert list(played["sut_error"]).index(True) == 0
     assert "time limit of 0.5 s" in estimate["first_sut_error"]
     refused = hazardhunt("estimate", "--controller-timeout", -1, "--out", tmp_path / "other")
     assert refused.returncode == 2

@@ -591,8 +591,9 @@ def test_an_estimate_is_over_the_episodes_the_sut_played(tmp_path):
             "--controller-param", f"lasts={lasts}", cwd=ROOT,
         )  # fmt: skip
 
-    # 10 episodes played (the trial episode counts), 90 not: the interval is over 10.
-    done = estimate_wearing_out(tmp_path / "mc", "mc", 11)
+    # 10 episodes played (the trial episode plays on a controller of its own), 90 not: the
+    # interval is over 10.
+    done = estimate_wearing_out(tmp_path / "mc", "mc", 10)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "mc" / "estimate.json").read_text())
     result = summary["probability"]
@@ -607,7 +608,7 @@ def test_an_estimate_is_over_the_episodes_the_sut_played(tmp_path):
     ) in done.stderr
     # Cross-entropy counts the episodes drawn once its proposal stopped moving: the last 50,
     # every one of which erred. Nothing it counts was tested: exit 1, nothing kept.
-    done = estimate_wearing_out(tmp_path / "ce", "ce", 51)
+    done = estimate_wearing_out(tmp_path / "ce", "ce", 50)
     assert done.returncode == 1
     assert (
         "error: every one of the 50 episodes drawn from the final proposal, the ones it counts, "

@@ -212,9 +212,11 @@ class EstimateRun:
         if source is None:
             encounters = encounters_of(config)
             if config.controller is not None or config.safety_layer is not None:
-                try_plugins(
-                    encounters.simulation, config.controller, config.safety_layer, "the estimate"
-                )
+                # On a SUT of its own, as in a worker process: a plug-in that keeps state from
+                # one episode to the next plays the estimate's first episode as its first.
+                sut = (config.controller, config.safety_layer)
+                trial = build_simulation(config.scenario, config.field, config.env, *sut)
+                try_plugins(trial, *sut, "the estimate")
             source = encounters
         self.source = source
         self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
