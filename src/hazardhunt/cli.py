@@ -682,6 +682,7 @@ def report(
     holds no results (not a run or campaign, or no run has finished yet).
     """
     from hazardhunt.analysis.report import write_report
+    from hazardhunt.analysis.results import failed_runs
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
 
@@ -703,7 +704,7 @@ def report(
             directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
-    _exit_if_runs_failed(directory, "the report covers")
+    _exit_if_runs_failed(failed_runs(directory), "the report covers")
 
 
 @app.command(cls=_Command)
@@ -739,6 +740,7 @@ def export(
     the others, if any; 2 when the directory holds no results (not a run or campaign, or no
     run has finished yet).
     """
+    from hazardhunt.analysis.results import failed_runs
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
@@ -746,15 +748,14 @@ def export(
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     cases = "1 case" if len(written) == 1 else f"{len(written)} cases"
     console.print(f"{cases} written to [bold]{out.resolve()}[/bold]")
+    failed = failed_runs(directory)
     if not written:
-        from hazardhunt.analysis.results import failed_runs
-
-        held = "the runs that completed hold" if failed_runs(directory) else "the results hold"
+        held = "the runs that completed hold" if failed else "the results hold"
         console.print(f"{held} no failure")
     if pytest_module:
         module = write_pytest_module(out, spec, trust_plugins=trust_plugins)
         console.print(f"pytest module written to [bold]{module}[/bold]")
-    _exit_if_runs_failed(directory, "the cases cover")
+    _exit_if_runs_failed(failed, "the cases cover")
 
 
 @app.command(cls=_Command)
@@ -783,8 +784,7 @@ def copy(
         console.print(
             f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
-    for run_id, error in copied.failed.items():
-        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    _print_failed(copied.failed)
     failed = f"[red]{len(copied.failed)} failed[/red] (nothing to copy), " if copied.failed else ""
     console.print(
         f"{len(copied.copied)} {'run' if len(copied.copied) == 1 else 'runs'} copied, "
@@ -793,17 +793,13 @@ def copy(
     )
 
 
-def _exit_if_runs_failed(directory: Path, written: str) -> None:
-    """Name the runs of a campaign directory that failed, with their errors, in red on stderr,
-    and exit with code 1 if there are any: what the command wrote (``written``: "the report
-    covers") covers only the runs that completed, and must not read as a pass."""
-    from hazardhunt.analysis.results import failed_runs
-
-    failed = failed_runs(directory)
+def _exit_if_runs_failed(failed: dict[str, str], written: str) -> None:
+    """Name the runs of a campaign that failed (``failed``: run id -> error), in red on
+    stderr, and exit with code 1 if there are any: what the command wrote (``written``: "the
+    report covers") covers only the runs that completed, and must not read as a pass."""
     if not failed:
         return
-    for run_id, error in failed.items():
-        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
+    _print_failed(failed)
     one = len(failed) == 1
     err_console.print(
         f"[red]error: {len(failed)} {'run' if one else 'runs'} of the campaign failed[/red], "
@@ -812,6 +808,12 @@ def _exit_if_runs_failed(directory: Path, written: str) -> None:
         highlight=False,
     )
     raise typer.Exit(1)
+
+
+def _print_failed(failed: dict[str, str]) -> None:
+    """Each run of a campaign that failed, with its error, in red on stderr."""
+    for run_id, error in failed.items():
+        err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
 
 
 def _warn_of_damaged_runs(directory: Path) -> None:

@@ -6,13 +6,13 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import pandas as pd
 from pydantic import ValidationError
 
 from hazardhunt.campaign.config import RECORDED, CampaignConfig
-from hazardhunt.campaign.ledger import ledger_errors
+from hazardhunt.campaign.ledger import RunStates, campaign_run_states
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
@@ -226,20 +226,7 @@ def failed_runs(directory: Path) -> dict[str, str]:
     return _finished_runs(directory).failed
 
 
-class _Found(NamedTuple):
-    """The runs of a run or campaign directory, by how they stand."""
-
-    complete: list[Path]
-    """The directories of the complete runs."""
-    unfinished: list[str]
-    """The run ids of the runs that have not finished, and did not fail."""
-    failed: dict[str, str]
-    """Run id -> the error the campaign's ledger records."""
-    damaged: dict[str, str]
-    """Run id -> what is wrong with its files."""
-
-
-def _finished_runs(directory: Path) -> _Found:
+def _finished_runs(directory: Path) -> RunStates:
     """The runs of a run or campaign directory, by how they stand.
 
     Raises:
@@ -258,35 +245,20 @@ def _finished_runs(directory: Path) -> _Found:
     damage = find_damage(directory)
     if damage is not None:
         raise ResultsError(f"{directory}: the run is damaged ({damage}); run it again")
-    return _Found([directory], [], {}, {})
+    return RunStates([directory], [], {}, {})
 
 
-def _campaign_runs(directory: Path) -> _Found:
-    """The runs of a campaign directory: a run that has not finished failed if the campaign's
-    ledger records it as failed, else it has not run yet (or is running)."""
+def _campaign_runs(directory: Path) -> RunStates:
     stored = directory / "campaign.json"
     try:  # what ran is read from the runs' files, its scenarios too: their files are not needed
         config = CampaignConfig.model_validate(_read_json(stored), context=RECORDED)
     except ValidationError as error:
         problem = format_validation_error(error)
         raise ResultsError(f"{stored}: not a campaign configuration: {problem}") from None
-    errors = ledger_errors(directory)
-    found = _Found([], [], {}, {})
-    for run in config.runs(RECORDED):
-        path = directory / "runs" / run.run_id
-        if not is_finished(path):
-            if run.run_id in errors:
-                found.failed[run.run_id] = errors[run.run_id]
-            else:
-                found.unfinished.append(run.run_id)
-        elif (damage := find_damage(path)) is not None:
-            found.damaged[run.run_id] = damage
-        else:
-            found.complete.append(path)
-    return found
+    return campaign_run_states(directory, config)
 
 
-def _nothing_complete(directory: Path, found: _Found) -> HazardhuntError:
+def _nothing_complete(directory: Path, found: RunStates) -> HazardhuntError:
     """Why no run of a campaign can be read: ``RunsFailed`` when some failed, else a
     ``ResultsError``."""
     if not found.failed and not found.damaged:

@@ -16,12 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from hazardhunt.campaign.config import (
-    RECORDED,
     ConfigError,
     first_difference,
     read_stored_campaign,
 )
-from hazardhunt.campaign.ledger import ledger_errors
+from hazardhunt.campaign.ledger import campaign_run_states
 from hazardhunt.campaign.records import campaign_totals
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
@@ -97,18 +96,10 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
     elif destination.exists() and any(destination.iterdir()):
         raise ConfigError(f"{destination}: exists and holds something else than this campaign")
     (destination / "runs").mkdir(parents=True, exist_ok=True)
-    copied = Copied()
-    errors = ledger_errors(source)
-    for run in config.runs(RECORDED):  # what ran: its scenario files are not needed
-        path = source / "runs" / run.run_id
-        if not is_finished(path) and run.run_id in errors:
-            copied.failed[run.run_id] = errors[run.run_id]
-        elif not is_finished(path):
-            copied.unfinished.append(run.run_id)
-        elif (damage := find_damage(path)) is not None:
-            copied.damaged[run.run_id] = damage
-        else:
-            _copy_if_new(path, destination / "runs" / run.run_id, leave_out, copied)
+    states = campaign_run_states(source, config)
+    copied = Copied(unfinished=states.unfinished, failed=states.failed, damaged=states.damaged)
+    for path in states.complete:
+        _copy_if_new(path, destination / "runs" / path.name, leave_out, copied)
     write_json_atomic(
         destination / "campaign.json", json.loads((source / "campaign.json").read_text())
     )

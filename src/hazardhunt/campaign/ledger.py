@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import cast
 
-from hazardhunt.campaign.config import CampaignConfig, RunConfig, first_difference
+from hazardhunt.campaign.config import RECORDED, CampaignConfig, RunConfig, first_difference
 from hazardhunt.campaign.records import (
     CampaignSummary,
     LedgerEntry,
@@ -71,6 +71,40 @@ def ledger_errors(out: Path) -> dict[str, str]:
             if isinstance(run_id, str):
                 errors[run_id] = str(error) if error else "no error recorded"
     return errors
+
+
+@dataclass(frozen=True)
+class RunStates:
+    """The runs of a run or campaign directory, by how they stand."""
+
+    complete: list[Path]
+    """The directories of the complete runs."""
+    unfinished: list[str]
+    """The run ids of the runs that have not run yet, or are running."""
+    failed: dict[str, str]
+    """Run id -> the error the campaign's ledger records."""
+    damaged: dict[str, str]
+    """Run id -> what is wrong with its files."""
+
+
+def campaign_run_states(out: Path, config: CampaignConfig) -> RunStates:
+    """The runs of the campaign ``config`` in ``out`` (read with :data:`RECORDED`: what ran,
+    its scenario files not needed): a run that has not finished failed if the ledger records it
+    as failed, else it has not run yet (or is running)."""
+    errors = ledger_errors(out)
+    states = RunStates([], [], {}, {})
+    for run in config.runs(RECORDED):
+        path = out / "runs" / run.run_id
+        if not is_finished(path):
+            if run.run_id in errors:
+                states.failed[run.run_id] = errors[run.run_id]
+            else:
+                states.unfinished.append(run.run_id)
+        elif (damage := find_damage(path)) is not None:
+            states.damaged[run.run_id] = damage
+        else:
+            states.complete.append(path)
+    return states
 
 
 class Ledger:
