@@ -131,25 +131,26 @@ def scenarios(
 
     chosen = names or list(BUILTIN_SCENARIOS)
     check_output_location(out)
-    simulations = [_scenario_simulation(name, field, solver) for name in chosen]  # all, first
+    for name in chosen:  # every file and option checked before the first is simulated
+        _check_scenario(name, field)
     table = Table(
         "scenario", "outcome", "sim time (s)", "min clearance (m)", "emergency stops", "picture"
     )
     rng = np.random.default_rng(seed)
     with _transient_bar(console) as progress:
         task = progress.add_task("simulating", total=len(chosen))
-        for name, simulation in zip(chosen, simulations, strict=True):
+        for name in chosen:  # one simulation at a time: each holds its own NMPC
             progress.update(task, description=f"simulating {name}")
+            simulation = _scenario_simulation(name, field, solver)
             table.add_row(*_simulate_and_draw(name, simulation, field, rng, out))
             progress.advance(task)
     console.print(table)
     console.print(f"Pictures written to [bold]{out.resolve()}[/bold]")
 
 
-def _scenario_simulation(name: str, field: str, solver: str) -> Simulation:
-    """The simulation of scenario ``name`` behind ``field``, its files and options checked."""
+def _check_scenario(name: str, field: str) -> None:
+    """Raises unless scenario ``name`` loads, its robot can drive its route and it has ``field``."""
     from hazardhunt.campaign.config import cached_scenario, route_problem
-    from hazardhunt.sim.simulation import Simulation
     from hazardhunt.sut.safety_layer import field_shape
     from hazardhunt.world.bodies import RobotParams
     from hazardhunt.world.scenario import ScenarioError
@@ -162,8 +163,15 @@ def _scenario_simulation(name: str, field: str, solver: str) -> Simulation:
         field_shape(scenario, field)
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint="--field") from None
+
+
+def _scenario_simulation(name: str, field: str, solver: str) -> Simulation:
+    """The simulation of scenario ``name`` (checked: :func:`_check_scenario`) behind ``field``."""
+    from hazardhunt.campaign.config import cached_scenario
+    from hazardhunt.sim.simulation import Simulation
+
     try:
-        return Simulation.build(scenario, field, solver=solver)
+        return Simulation.build(cached_scenario(name), field, solver=solver)
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint="--solver") from None
 
@@ -469,18 +477,29 @@ def _assignments(option: str, assignments: list[str] | None) -> dict[str, Any]:
 
 def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSpec | None:
     """A plug-in's specification from the command line; its module may sit in the working
-    directory."""
+    directory.
+
+    Raises:
+        ConfigError: The parameters do not read, or the module does not import or lacks the
+            name: naming ``option``.
+    """
     from hazardhunt.campaign.plugins import PluginSpec
+    from hazardhunt.sut.plugins import PluginError, load_attribute
 
     if path is None:
         if params:
             raise ConfigError(f"{option}-param: given without {option}")
         return None
-    return PluginSpec(
+    spec = PluginSpec(
         path=path,
         params=_assignments(f"{option}-param", params),
         search_path=[str(Path.cwd())],
     )
+    try:  # the user named it: importing it here says which option names what does not load
+        load_attribute(spec.path, spec.search_path)
+    except PluginError as error:
+        raise ConfigError(f"{option}: {error}") from None
+    return spec
 
 
 def _announcer() -> Callable[[str], None]:
@@ -697,7 +716,7 @@ def report(
 
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None
-    _warn_of_damaged_runs(directory)
+    _warn_of_left_out_runs(directory)
     with _transient_bar(console) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
@@ -744,7 +763,7 @@ def export(
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
-    _warn_of_damaged_runs(directory)
+    _warn_of_left_out_runs(directory)
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     cases = "1 case" if len(written) == 1 else f"{len(written)} cases"
     console.print(f"{cases} written to [bold]{out.resolve()}[/bold]")
@@ -785,6 +804,11 @@ def copy(
             f"[yellow]warning:[/yellow] {shown(run_id)} not copied: damaged ({shown(damage)})"
         )
     _print_failed(copied.failed)
+    if copied.ledger_problem is not None:
+        err_console.print(
+            f"[yellow]warning:[/yellow] the campaign's ledger is not copied, and runs not "
+            f"finished may have failed: {shown(copied.ledger_problem)}"
+        )
     failed = f"[red]{len(copied.failed)} failed[/red] (nothing to copy), " if copied.failed else ""
     console.print(
         f"{len(copied.copied)} {'run' if len(copied.copied) == 1 else 'runs'} copied, "
@@ -816,18 +840,26 @@ def _print_failed(failed: dict[str, str]) -> None:
         err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
 
 
-def _warn_of_damaged_runs(directory: Path) -> None:
-    """Name the runs of a campaign directory left out because their files are damaged."""
-    from hazardhunt.analysis.results import ResultsError, damaged_runs
+def _warn_of_left_out_runs(directory: Path) -> None:
+    """Name the runs of a campaign directory left out because their files are damaged, and
+    say so if its ledger does not read (its failed runs then read as not finished)."""
+    from hazardhunt.analysis.results import ResultsError, run_states
 
     try:
-        damaged = damaged_runs(directory)
+        states = run_states(directory)
     except ResultsError:
         return  # the command reports it
-    for run_id, damage in damaged.items():
+    for run_id, damage in states.damaged.items():
         err_console.print(
             f"[yellow]warning:[/yellow] run {shown(run_id)} is damaged ({shown(damage)}) and "
             "left out; running the campaign again redoes it"
+        )
+    if states.ledger_problem is not None and states.unfinished and states.complete:
+        one = len(states.unfinished) == 1
+        err_console.print(
+            f"[yellow]warning:[/yellow] {len(states.unfinished)} {'run' if one else 'runs'} of "
+            f"the campaign {'has' if one else 'have'} not finished, and may have failed: the "
+            f"campaign's ledger cannot tell ({shown(states.ledger_problem)})"
         )
 
 
@@ -1017,6 +1049,8 @@ def estimate_command(
 
     if batch_size is None:
         batch_size = resumed_batch_size(out, method) or default_batch_size(method, episodes)
+    if people is not None and not people.endswith(".toml") and is_import_path(people):
+        _plugin("--people", people, None)  # one line naming the option if it does not import
 
     config = _validated(
         lambda: EstimateConfig(

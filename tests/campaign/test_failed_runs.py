@@ -5,6 +5,7 @@ report and export say so instead of "not finished yet"."""
 
 import json
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -88,7 +89,7 @@ def test_a_report_names_the_failed_run_first_and_exits_1(one_failed):
     assert done.returncode == 1
     assert "report written to" in done.stdout
     failed, error = done.stderr.strip().splitlines()
-    assert failed.startswith("failed: crossing__none__random__seed0: NothingTested: ")
+    assert failed.startswith("failed: crossing__none__random__seed0: NothingTested: every ")
     assert LOST in failed
     assert error == (
         "error: 1 run of the campaign failed, so the report covers only the runs that "
@@ -144,6 +145,7 @@ def test_when_every_run_failed_report_and_export_say_why(tmp_path):
             "crossing__none__random__seed0 failed (NothingTested: "
         )
         assert LOST in said
+        assert said.count("crossing__none__random__seed0") == 1  # the error says it once
         assert "finished yet" not in said
 
     # A run that has simply not run yet is still called so.
@@ -155,3 +157,47 @@ def test_when_every_run_failed_report_and_export_say_why(tmp_path):
     done = hazardhunt("report", out)
     assert done.returncode == 2
     assert done.stderr.strip() == f"error: {out}: no run of the campaign has finished yet"
+
+
+def test_a_ledger_that_does_not_read_leaves_failed_runs_in_doubt_not_unfinished(
+    one_failed, tmp_path
+):
+    results, _ = one_failed
+    broken = tmp_path / "broken"
+    shutil.copytree(results, broken)
+    (broken / "summary.json").write_text("{not json")
+    doubt = "1 run of the campaign has not finished, and may have failed: the campaign's ledger"
+
+    report = hazardhunt("report", broken)
+    assert report.returncode == 0, report.stderr
+    assert doubt in report.stderr
+    page = (broken / "report" / "index.html").read_text()
+    assert "Some may have failed: the campaign&#39;s ledger cannot tell" in page
+
+    copy = hazardhunt("copy", broken, "--out", tmp_path / "kept")
+    assert copy.returncode == 0, copy.stderr
+    assert "the campaign's ledger is not copied, and runs not finished may have failed" in (
+        copy.stderr
+    )
+    assert "1 run copied" in copy.stdout
+    assert not (tmp_path / "kept" / "summary.json").exists()
+
+    # With no run complete, it says that it cannot tell, not that nothing has finished yet.
+    shutil.rmtree(broken / "runs" / "head-on__none__random__seed0")
+    report = hazardhunt("report", broken)
+    assert report.returncode == 2
+    assert report.stderr.startswith(
+        f"error: {broken}: no run of the campaign has finished, and its ledger cannot tell "
+        "which failed: "
+    )
+
+
+def test_a_copy_reads_a_ledger_of_the_wrong_shape_as_data(one_failed, tmp_path):
+    results, _ = one_failed
+    odd = tmp_path / "odd"
+    shutil.copytree(results, odd)
+    (odd / "summary.json").write_text(json.dumps({"runs": [1, {"run_id": 5}, {"status": "x"}]}))
+    first = hazardhunt("copy", odd, "--out", tmp_path / "kept")
+    again = hazardhunt("copy", odd, "--out", tmp_path / "kept")  # reads the copy's ledger too
+    assert (first.returncode, again.returncode) == (0, 0), first.stderr + again.stderr
+    assert "Traceback" not in first.stderr + again.stderr

@@ -121,6 +121,30 @@ def test_a_bad_controller_is_one_clear_line_and_runs_nothing(tmp_path, path, mes
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [
+        (["replay", "RUN", "--episode", "0"], "--controller"),
+        (["replay", "RUN", "--episode", "0"], "--safety-layer"),
+        (["regress", "RUN"], "--controller"),
+        (["report", "RUN"], "--classifier"),
+        (["export", "RUN", "--out", "cases"], "--classifier"),
+        (["campaign", "campaign.toml", "--out", "results"], "--classifier"),
+        (["estimate", "--episodes", "100", "--out", "estimate"], "--people"),
+        (["estimate", "--episodes", "100", "--out", "estimate"], "--controller"),
+    ],
+)  # fmt: skip
+def test_every_command_names_the_option_whose_plug_in_does_not_import(tmp_path, command, option):
+    command = [str(tmp_path / "run") if word == "RUN" else word for word in command]
+    done = hazardhunt(*command, option, "no_such_module:Thing", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: {option}: 'no_such_module:Thing': cannot import module 'no_such_module': "
+        "No module named 'no_such_module'"
+    )
+    assert sorted(path.name for path in tmp_path.iterdir()) == []
+
+
 def test_parameters_the_class_does_not_take_are_named(tmp_path):
     with pytest.raises(PluginError, match=r"does not take these parameters: .*'stop_distnce'"):
         build_controller(CONTROLLER, {"stop_distnce": 1.0}, [str(EXAMPLE)])
@@ -415,11 +439,11 @@ def test_reading_results_never_imports_the_classifier_they_name(charged):
 @pytest.mark.parametrize(
     ("options", "message"),
     [
-        (["nowhere:Tester"], "'nowhere:Tester': cannot import module 'nowhere'"),
-        (["my_testers:Sleepy"], "'my_testers:Sleepy' does not satisfy the Tester protocol: "
-         "it lacks explore"),
+        (["nowhere:Tester"], "--tester: 'nowhere:Tester': cannot import module 'nowhere'"),
+        (["my_testers:Sleepy"], "tester: 'my_testers:Sleepy' does not satisfy the Tester "
+         "protocol: it lacks explore"),
         (["my_testers:Charge", "--tester-param", "sped=1"],
-         "'my_testers:Charge' does not take these parameters: got an unexpected keyword "
+         "tester: 'my_testers:Charge' does not take these parameters: got an unexpected keyword "
          "argument 'sped'"),
     ],
 )  # fmt: skip
@@ -431,8 +455,7 @@ def test_a_bad_tester_plug_in_is_one_clear_line_and_runs_nothing(tmp_path, optio
     )  # fmt: skip
     assert done.returncode == 2
     [line] = done.stderr.strip().splitlines()
-    assert line.startswith("error: tester: ")
-    assert message in line
+    assert line.startswith(f"error: {message}")
     assert not (tmp_path / "run").exists()
 
 

@@ -655,7 +655,11 @@ def _runs(report: _Report, results: Results) -> None:
         section.blocks.append(
             Text(
                 f"{unfinished} run{_s(unfinished)} of the campaign {'has' if one else 'have'} not "
-                f"finished and {'is' if one else 'are'} left out: {', '.join(results.unfinished)}.",
+                f"finished and {'is' if one else 'are'} left out: {', '.join(results.unfinished)}."
+                + "".join(
+                    f" Some may have failed: the campaign's ledger cannot tell ({problem})."
+                    for problem in results.ledger_problems
+                ),
                 "warning",
             )
         )

@@ -67,6 +67,9 @@ class Results:
     damaged: dict[str, str] = field(default_factory=dict)
     """Run ids of the campaign whose files do not match the checksums they recorded (or do not
     read back), with what is wrong; they are left out of every table."""
+    ledger_problems: list[str] = field(default_factory=list)
+    """Why a campaign's ledger (``summary.json``) does not read, per campaign whose does not:
+    its runs that failed are then among ``unfinished``."""
     classifier: FailureClassifier | None = MechanismClassifier()
     """The taxonomy of the ``class`` column: the classifier that classified the failures anew,
     else the built-in one if every run recorded it, else None (runs classified by a plug-in
@@ -126,14 +129,17 @@ def load_results_of(
     unfinished: list[str] = []
     failed: dict[str, str] = {}
     damaged: dict[str, str] = {}
+    ledger_problems: list[str] = []
     for each in directories:
-        found = _finished_runs(each)
+        found = run_states(each)
         if not found.complete:
             raise _nothing_complete(each, found)
         run_directories += found.complete
         unfinished += found.unfinished
         failed |= found.failed
         damaged |= found.damaged
+        if found.ledger_problem is not None and found.unfinished:
+            ledger_problems.append(found.ledger_problem)
     summaries = [_read_json(path / "summary.json") for path in run_directories]
     configs = [_read_json(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
@@ -161,6 +167,7 @@ def load_results_of(
         unfinished=unfinished,
         failed=failed,
         damaged=damaged,
+        ledger_problems=ledger_problems,
         classifier=taxonomy,
         **tables,
     )
@@ -213,7 +220,7 @@ def damaged_runs(directory: Path) -> dict[str, str]:
     Raises:
         ResultsError: When ``directory`` is neither a run nor a campaign directory.
     """
-    return _finished_runs(directory).damaged
+    return run_states(directory).damaged
 
 
 def failed_runs(directory: Path) -> dict[str, str]:
@@ -223,10 +230,10 @@ def failed_runs(directory: Path) -> dict[str, str]:
     Raises:
         ResultsError: When ``directory`` is neither a run nor a campaign directory.
     """
-    return _finished_runs(directory).failed
+    return run_states(directory).failed
 
 
-def _finished_runs(directory: Path) -> RunStates:
+def run_states(directory: Path) -> RunStates:
     """The runs of a run or campaign directory, by how they stand.
 
     Raises:
@@ -262,6 +269,11 @@ def _nothing_complete(directory: Path, found: RunStates) -> HazardhuntError:
     """Why no run of a campaign can be read: ``RunsFailed`` when some failed, else a
     ``ResultsError``."""
     if not found.failed and not found.damaged:
+        if found.ledger_problem is not None:
+            return ResultsError(
+                f"{directory}: no run of the campaign has finished, and its ledger cannot tell "
+                f"which failed: {found.ledger_problem}; running the campaign again writes it anew"
+            )
         return ResultsError(f"{directory}: no run of the campaign has finished yet")
     reasons = [f"run {run_id} failed ({error})" for run_id, error in found.failed.items()]
     reasons += [f"{run_id} is damaged ({damage})" for run_id, damage in found.damaged.items()]

@@ -20,8 +20,8 @@ from hazardhunt.campaign.config import (
     first_difference,
     read_stored_campaign,
 )
-from hazardhunt.campaign.ledger import campaign_run_states
-from hazardhunt.campaign.records import campaign_totals
+from hazardhunt.campaign.ledger import campaign_run_states, read_ledger
+from hazardhunt.campaign.records import LedgerEntry, campaign_totals
 from hazardhunt.campaign.replay import not_finished
 from hazardhunt.campaign.run import is_finished
 from hazardhunt.campaign.store import (
@@ -44,6 +44,9 @@ class Copied:
     failed: dict[str, str] = field(default_factory=dict)
     """Runs the campaign's ledger records as failed, with their errors: nothing to copy."""
     damaged: dict[str, str] = field(default_factory=dict)
+    ledger_problem: str | None = None
+    """Why the campaign's ledger (``summary.json``) does not read, if it does not: it is not
+    copied, and its failed runs are among ``unfinished``."""
 
 
 def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = LEAVABLE) -> Copied:
@@ -52,9 +55,10 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
 
     A campaign's ``campaign.json`` and ``summary.json`` are copied as they are, except that a
     run the copy already holds finished stays complete in its summary when the source does not
-    have it complete (a campaign directory started afresh after an earlier copy); a run already
-    in ``destination`` with the same summary is left alone, one with another summary (run
-    again since) is replaced.
+    have it complete (a campaign directory started afresh after an earlier copy); a
+    ``summary.json`` that does not read is not copied (``ledger_problem`` says why). A run
+    already in ``destination`` with the same summary is left alone, one with another summary
+    (run again since) is replaced.
 
     Raises:
         ConfigError: ``source`` is neither a run nor a campaign directory, a run that has not
@@ -103,27 +107,31 @@ def _copy_campaign(source: Path, destination: Path, leave_out: tuple[str, ...]) 
     write_json_atomic(
         destination / "campaign.json", json.loads((source / "campaign.json").read_text())
     )
-    if (source / "summary.json").is_file():
+    their_runs, copied.ledger_problem = read_ledger(source)
+    if (source / "summary.json").is_file() and copied.ledger_problem is None:
         summary = json.loads((source / "summary.json").read_text())
-        kept = destination / "summary.json"
-        if kept.is_file():
-            summary = _keeping_runs(summary, json.loads(kept.read_text()), destination / "runs")
-        write_json_atomic(kept, summary)
+        my_runs, _ = read_ledger(destination)
+        if my_runs:
+            summary = _keeping_runs(summary, their_runs, my_runs, destination / "runs")
+        write_json_atomic(destination / "summary.json", summary)
     return copied
 
 
-def _keeping_runs(theirs: dict[str, Any], mine: dict[str, Any], runs: Path) -> dict[str, Any]:
-    """The source's campaign summary, with the runs the copy holds finished kept as the copy
-    records them where the source does not have them complete (the source directory was
-    started afresh, or lost its runs since an earlier copy); the totals counted anew."""
-    complete = {e["run_id"]: e for e in mine.get("runs", []) if e["status"] == "complete"}
+def _keeping_runs(
+    summary: dict[str, Any], theirs: list[LedgerEntry], mine: list[LedgerEntry], runs: Path
+) -> dict[str, Any]:
+    """The source's campaign ``summary`` (its run entries ``theirs``), with the runs the copy
+    holds finished kept as the copy records them (``mine``) where the source does not have them
+    complete (the source directory was started afresh, or lost its runs since an earlier copy);
+    the totals counted anew."""
+    complete = {e["run_id"]: e for e in mine if e["status"] == "complete"}
     entries = [
         complete[e["run_id"]]
         if e["status"] != "complete" and e["run_id"] in complete and is_finished(runs / e["run_id"])
         else e
-        for e in theirs.get("runs", [])
+        for e in theirs
     ]
-    return theirs | campaign_totals(entries) | {"runs": entries}
+    return summary | campaign_totals(entries) | {"runs": entries}
 
 
 def _copy_if_new(

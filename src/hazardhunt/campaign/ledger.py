@@ -43,11 +43,13 @@ class RunOutcome:
 
 
 def failed(run: RunConfig, error: BaseException, remote_traceback: str | None = None) -> RunOutcome:
-    """The outcome of a run that raised ``error`` (on another machine: ``remote_traceback``)."""
+    """The outcome of a run that raised ``error`` (on another machine: ``remote_traceback``).
+    Its error is said after the run's id, so without the ``run ID:`` its message may open with."""
+    message = str(error).removeprefix(f"run {run.run_id}: ")
     outcome = RunOutcome(
         run,
         None,
-        f"{type(error).__name__}: {error}",
+        f"{type(error).__name__}: {message}",
         remote_traceback or "".join(traceback.format_exception(error)),
     )
     if isinstance(error, NothingTested):
@@ -55,22 +57,38 @@ def failed(run: RunConfig, error: BaseException, remote_traceback: str | None = 
     return outcome
 
 
-def ledger_errors(out: Path) -> dict[str, str]:
-    """Run id -> error of every run the ledger of the campaign directory ``out`` records as
-    failed; empty if it has no readable ledger. The ledger is read as data from a file that may
-    come from anyone: entries that are not as the ledger writes them are skipped."""
+def read_ledger(out: Path) -> tuple[list[LedgerEntry], str | None]:
+    """The run entries of the ledger of the campaign directory ``out``, and what is wrong with
+    the ledger if it does not read (None if it reads, or if there is none yet). The ledger is
+    read as data from a file that may come from anyone: entries that are not as the ledger
+    writes them (a run id and a status) are skipped."""
+    path = out / "summary.json"
     try:
-        stored = json.loads((out / "summary.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    entries = stored.get("runs") if isinstance(stored, dict) else None
-    errors = {}
-    for entry in entries if isinstance(entries, list) else []:
-        if isinstance(entry, dict) and entry.get("status") == "failed":
-            run_id, error = entry.get("run_id"), entry.get("error")
-            if isinstance(run_id, str):
-                errors[run_id] = str(error) if error else "no error recorded"
-    return errors
+        stored = json.loads(path.read_text())
+    except FileNotFoundError:
+        return [], None
+    except (OSError, ValueError) as error:
+        return [], f"{path} does not read ({type(error).__name__}: {error})"
+    runs = stored.get("runs") if isinstance(stored, dict) else None
+    if not isinstance(runs, list):
+        return [], f"{path} is not a campaign's summary (no list of runs)"
+    entries = [
+        cast(LedgerEntry, entry)
+        for entry in runs
+        if isinstance(entry, dict)
+        and isinstance(entry.get("run_id"), str)
+        and isinstance(entry.get("status"), str)
+    ]
+    return entries, None
+
+
+def ledger_errors(entries: list[LedgerEntry]) -> dict[str, str]:
+    """Run id -> error of every run the ledger ``entries`` record as failed."""
+    return {
+        entry["run_id"]: str(entry.get("error") or "no error recorded")
+        for entry in entries
+        if entry["status"] == "failed"
+    }
 
 
 @dataclass(frozen=True)
@@ -85,14 +103,18 @@ class RunStates:
     """Run id -> the error the campaign's ledger records."""
     damaged: dict[str, str]
     """Run id -> what is wrong with its files."""
+    ledger_problem: str | None = None
+    """Why the campaign's ledger does not read, if it does not: a run it recorded as failed
+    is then among ``unfinished``, as nothing tells the two apart."""
 
 
 def campaign_run_states(out: Path, config: CampaignConfig) -> RunStates:
     """The runs of the campaign ``config`` in ``out`` (read with :data:`RECORDED`: what ran,
     its scenario files not needed): a run that has not finished failed if the ledger records it
     as failed, else it has not run yet (or is running)."""
-    errors = ledger_errors(out)
-    states = RunStates([], [], {}, {})
+    entries, problem = read_ledger(out)
+    errors = ledger_errors(entries)
+    states = RunStates([], [], {}, {}, problem)
     for run in config.runs(RECORDED):
         path = out / "runs" / run.run_id
         if not is_finished(path):
