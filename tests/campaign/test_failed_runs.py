@@ -196,7 +196,13 @@ def test_a_copy_reads_a_ledger_of_the_wrong_shape_as_data(one_failed, tmp_path):
     results, _ = one_failed
     odd = tmp_path / "odd"
     shutil.copytree(results, odd)
-    (odd / "summary.json").write_text(json.dumps({"runs": [1, {"run_id": 5}, {"status": "x"}]}))
+    entries = [
+        1,
+        {"run_id": 5},
+        {"status": "failed"},
+        {"run_id": "head-on__none__random__seed0", "status": "complete", "episodes": "4"},
+    ]
+    (odd / "summary.json").write_text(json.dumps({"runs": entries}))
     first = hazardhunt("copy", odd, "--out", tmp_path / "kept")
     again = hazardhunt("copy", odd, "--out", tmp_path / "kept")  # reads the copy's ledger too
     assert (first.returncode, again.returncode) == (0, 0), first.stderr + again.stderr

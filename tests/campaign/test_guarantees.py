@@ -298,6 +298,40 @@ def test_a_damaged_run_directory_is_a_one_line_error_for_report_and_is_redone_by
     pd.testing.assert_frame_equal(run_tables(out)[0], expected)
 
 
+@pytest.mark.parametrize(
+    ("key", "value", "problem"),
+    [
+        ("scenario", None, "summary.json: scenario: must be text"),
+        ("seed", "0", "summary.json: seed: must be a whole number"),
+        ("classes", ["left/moving", 3], "summary.json: classes.1: must be text"),
+        ("run_id", ..., "summary.json: run_id: missing"),
+    ],
+)
+def test_a_summary_of_the_wrong_shape_is_damage_for_every_command_not_a_traceback(
+    tmp_path: Path, key: str, value: object, problem: str
+) -> None:
+    # summary.json holds the run's checksums, so no checksum covers it: its keys are checked.
+    out = tmp_path / "run"
+    assert hazardhunt(*run_args(out)).returncode == 0
+    summary = json.loads((out / "summary.json").read_text())
+    if value is ...:
+        del summary[key]
+    else:
+        summary[key] = value
+    (out / "summary.json").write_text(json.dumps(summary))
+    for command in (
+        ("report", out),
+        ("export", out, "--out", tmp_path / "cases"),
+        ("replay", out, "--episode", 0),
+        ("copy", out, "--out", tmp_path / "copy"),
+    ):
+        done = hazardhunt(*command)
+        assert done.returncode == 2, (command, done.stderr)
+        [line] = done.stderr.strip().splitlines()
+        assert f"the run is damaged ({problem}" in line, line
+    assert not (tmp_path / "cases").exists()
+
+
 # --- a full disk ---------------------------------------------------------------------------------
 
 

@@ -516,6 +516,26 @@ def damaged_estimates_are_named_and_mend(directory, command):
     shown = hazardhunt("report", directory, cwd=ROOT)
     assert shown.returncode == 2
     assert "estimate.json: cannot be read" in shown.stderr
+    # Of the wrong shape, where only its keys' types tell: named too, not a traceback.
+    stored = json.loads(written)
+    for key, value, said in (
+        ("episodes", "150", 'episodes: must be a whole number, not "150"'),
+        ("probability", {**stored["probability"], "low": None}, "probability.low: must be"),
+        ("method", ..., "method: missing"),
+    ):
+        changed = {k: v for k, v in stored.items() if k != key}
+        (directory / "estimate.json").write_text(
+            json.dumps(changed if value is ... else changed | {key: value})
+        )
+        shown = hazardhunt("report", directory, cwd=ROOT)
+        assert shown.returncode == 2, shown.stderr
+        [line] = shown.stderr.strip().splitlines()
+        assert f"estimate.json: cannot be read (not an estimate's summary: {said}" in line
+    likeliest = {name: {**found, "episode": 10**6} for name, found in stored["most_likely"].items()}
+    (directory / "estimate.json").write_text(json.dumps(stored | {"most_likely": likeliest}))
+    shown = hazardhunt("report", directory, cwd=ROOT)
+    assert shown.returncode == 2, shown.stderr
+    assert "most_likely names episode 1000000, which the batches do not hold" in shown.stderr
     (directory / "estimate.json").write_text(written)
     batch = directory / "batches" / "00001.parquet"
     batch.write_bytes(batch.read_bytes()[:100])

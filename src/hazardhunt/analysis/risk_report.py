@@ -26,7 +26,7 @@ from hazardhunt.campaign.store import write_bytes_atomic
 from hazardhunt.env.rendering import RecordedEpisode, animate_episode, plot_episode
 from hazardhunt.errors import InputError
 from hazardhunt.likelihood.encounters import Draw, SimulationEncounters
-from hazardhunt.likelihood.results import NOTES
+from hazardhunt.likelihood.results import NOTES, estimate_record_problem
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     batch_path,
@@ -60,6 +60,8 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
         summary = json.loads(path.read_text())
         if not isinstance(summary, dict) or not isinstance(summary.get("probability"), dict):
             raise ValueError("not an estimate's summary")
+        if (problem := estimate_record_problem(summary)) is not None:
+            raise ValueError(f"not an estimate's summary: {problem}")
     except (OSError, UnicodeDecodeError, ValueError) as error:  # JSONDecodeError too
         raise InputError(
             f"{path}: cannot be read ({error}); run the estimate's hazardhunt estimate command "
@@ -70,6 +72,14 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
     if not batches:
         raise InputError(f"{directory}: the estimate's batches are missing (batches/)")
     episodes = pd.concat(batches, ignore_index=True)
+    played = set(episodes["episode"])
+    for found in (summary.get("most_likely") or {}).values():
+        if found["episode"] not in played:
+            raise InputError(
+                f"{path}: most_likely names episode {found['episode']}, which the batches do "
+                "not hold; run the estimate's hazardhunt estimate command again to write it "
+                "anew from the batches"
+            )
     final = directory / "report"
     scratch = directory / ".report.partial"
     shutil.rmtree(scratch, ignore_errors=True)

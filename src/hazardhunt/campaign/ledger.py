@@ -18,6 +18,7 @@ from hazardhunt.campaign.records import (
     NothingTested,
     RunSummary,
     campaign_totals,
+    ledger_entry_problem,
 )
 from hazardhunt.campaign.replay import ReplayError, load_run_config
 from hazardhunt.campaign.run import is_finished
@@ -61,7 +62,8 @@ def read_ledger(out: Path) -> tuple[list[LedgerEntry], str | None]:
     """The run entries of the ledger of the campaign directory ``out``, and what is wrong with
     the ledger if it does not read (None if it reads, or if there is none yet). The ledger is
     read as data from a file that may come from anyone: entries that are not as the ledger
-    writes them (a run id and a status) are skipped."""
+    writes them (a run id, a status, and every other key of the type a ledger writes) are
+    skipped."""
     path = out / "summary.json"
     try:
         stored = json.loads(path.read_text())
@@ -78,6 +80,7 @@ def read_ledger(out: Path) -> tuple[list[LedgerEntry], str | None]:
         if isinstance(entry, dict)
         and isinstance(entry.get("run_id"), str)
         and isinstance(entry.get("status"), str)
+        and ledger_entry_problem(entry) is None
     ]
     return entries, None
 

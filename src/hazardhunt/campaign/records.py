@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import resource
 import time
-from typing import Any, TypedDict
+from typing import Any
+
+from pydantic import TypeAdapter, ValidationError
+from typing_extensions import TypedDict  # which pydantic validates on Python 3.11
 
 from hazardhunt.errors import HazardhuntError
+from hazardhunt.textfiles import format_validation_error
 
 
 def cpu_seconds() -> float:
@@ -116,6 +120,25 @@ class RunSummary(TypedDict, total=False):
     """Folders a copy left out (``trajectories``)."""
 
 
+RUN_SUMMARY_KEYS = ("run_id", "scenario", "field", "tester", "seed", "episodes", "failures")
+"""Keys of a run's ``summary.json`` that every version has written and reading results needs."""
+
+
+def summary_problem(stored: dict[str, Any]) -> str | None:
+    """What is wrong with ``stored`` as a run's ``summary.json`` (``key: problem``), or None:
+    a key every run writes is missing, or a key holds a value of another type than a run writes
+    (``seed: must be a whole number, not "1"``). A run received from anyone is read as data:
+    this is checked before its summary is read as a run's."""
+    for key in RUN_SUMMARY_KEYS:
+        if key not in stored:
+            return f"{key}: missing"
+    try:
+        _RUN_SUMMARY.validate_python(stored, strict=True)
+    except ValidationError as error:
+        return format_validation_error(error)
+    return None
+
+
 class LedgerEntry(RunSummary, total=False):
     """A run as a campaign's ``summary.json`` lists it: its summary (without checksums) once
     complete, else its keys; and how it stands. A run that failed because it tested nothing
@@ -165,3 +188,17 @@ def campaign_totals(entries: list[LedgerEntry]) -> CampaignTotals:
         "failures": sum(e.get("failures", 0) for e in complete),
         "sut_errors": sum(e.get("sut_errors", 0) for e in complete),
     }
+
+
+def ledger_entry_problem(entry: dict[str, Any]) -> str | None:
+    """What is wrong with ``entry`` as a run's entry of a campaign's ledger, or None: a key
+    that holds a value of another type than the ledger writes."""
+    try:
+        _LEDGER_ENTRY.validate_python(entry, strict=True)
+    except ValidationError as error:
+        return format_validation_error(error)
+    return None
+
+
+_RUN_SUMMARY = TypeAdapter(RunSummary)
+_LEDGER_ENTRY = TypeAdapter(LedgerEntry)

@@ -36,7 +36,12 @@ from typing import Any
 import pandas as pd
 import pyarrow.parquet as pq
 
-from hazardhunt.campaign.records import FirstError, RequirementCount, requirement_count
+from hazardhunt.campaign.records import (
+    FirstError,
+    RequirementCount,
+    requirement_count,
+    summary_problem,
+)
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -142,6 +147,8 @@ def find_damage(directory: Path) -> str | None:
         return f"summary.json cannot be read ({error})"
     if not isinstance(summary, dict):
         return "summary.json is not a JSON object"
+    if (problem := summary_problem(summary)) is not None:
+        return f"summary.json: {problem}"
     recorded = summary.get("checksums")
     if recorded is None:
         return _unreadable_file(directory) or _table_problem(directory)

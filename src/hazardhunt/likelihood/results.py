@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pydantic import TypeAdapter, ValidationError
+from typing_extensions import NotRequired, TypedDict  # which pydantic validates on Python 3.11
 
 from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
 from hazardhunt.likelihood.run import (
@@ -27,6 +29,7 @@ from hazardhunt.likelihood.run import (
     nothing_tested,
 )
 from hazardhunt.likelihood.splitting import SplittingPlanner, level_records, splitting_estimate
+from hazardhunt.textfiles import format_validation_error
 
 TARGET_RELATIVE_ERROR = 0.3
 """The relative error the comparison with plain Monte Carlo is stated at."""
@@ -323,3 +326,62 @@ def _finite(value: Any) -> Any:
     if isinstance(value, np.generic):
         return _finite(value.item())
     return value
+
+
+class _Probability(TypedDict):
+    probability: float
+    low: float
+    high: float
+    failures: int
+    interval: str
+    episodes: NotRequired[int]
+
+
+class _ConvergencePoint(TypedDict):
+    episodes: float
+    probability: float | None
+    low: float | None
+    high: float | None
+
+
+class _Likeliest(TypedDict):
+    episode: int
+    log_p: float
+
+
+class _MonteCarloEquivalent(TypedDict):
+    relative_error: float
+    episodes_for_same_error: float
+    ratio: float
+    episodes_for_target: float
+    target_relative_error: float
+
+
+class _EstimateRecord(TypedDict):
+    """What a report reads of ``estimate.json`` (:func:`summarise` writes more)."""
+
+    method: str
+    episodes: int
+    probability: _Probability
+    classes: dict[str, _Probability]
+    convergence: list[_ConvergencePoint]
+    sut_errors: NotRequired[int]
+    most_likely: NotRequired[dict[str, _Likeliest] | None]
+    monte_carlo_equivalent: NotRequired[_MonteCarloEquivalent | None]
+    caveat: NotRequired[str | None]
+    levels_warning: NotRequired[str | None]
+    untested: NotRequired[dict[str, Any] | None]
+
+
+_ESTIMATE_RECORD = TypeAdapter(_EstimateRecord)
+
+
+def estimate_record_problem(stored: object) -> str | None:
+    """What is wrong with ``stored`` as an estimate's ``estimate.json`` (``key: problem``), or
+    None: a key a report reads is missing or holds a value of another type than
+    :func:`summarise` writes. An estimate received from anyone is read as data."""
+    try:
+        _ESTIMATE_RECORD.validate_python(stored, strict=True)
+    except ValidationError as error:
+        return format_validation_error(error)
+    return None
