@@ -8,6 +8,7 @@ or fill the disk once their episodes are played; the SUT is the cheap conservati
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
 import subprocess
@@ -330,6 +331,35 @@ def test_a_summary_of_the_wrong_shape_is_damage_for_every_command_not_a_tracebac
         [line] = done.stderr.strip().splitlines()
         assert f"the run is damaged ({problem}" in line, line
     assert not (tmp_path / "cases").exists()
+
+
+def test_a_run_forged_with_fresh_checksums_is_named_not_a_traceback(tmp_path: Path) -> None:
+    # Checksums catch damage, not a sender who writes them anew: what is read is checked too.
+    out = tmp_path / "run"
+    assert hazardhunt(*run_args(out)).returncode == 0
+    summary = json.loads((out / "summary.json").read_text())
+    config = json.loads((out / "config.json").read_text())
+    (out / "config.json").write_text(json.dumps(config | {"run": "crossing"}))
+    summary["checksums"]["config.json"] = hashlib.sha256(
+        (out / "config.json").read_bytes()
+    ).hexdigest()
+    (out / "summary.json").write_text(json.dumps(summary))
+    for command in (("report", out), ("export", out, "--out", tmp_path / "cases")):
+        done = hazardhunt(*command)
+        assert done.returncode == 2, (command, done.stderr)
+        [line] = done.stderr.strip().splitlines()
+        assert line == f"error: {out / 'config.json'}: not a run's configuration (no run table)"
+
+    (out / "config.json").write_text(json.dumps(config))
+    summary["checksums"]["config.json"] = hashlib.sha256(
+        (out / "config.json").read_bytes()
+    ).hexdigest()
+    (out / "summary.json").write_text(json.dumps(summary | {"field_shape": {"radius": 2.0}}))
+    done = hazardhunt("report", out)
+    assert done.returncode == 2, done.stderr
+    [line] = done.stderr.strip().splitlines()
+    assert "the run is damaged (summary.json: field_shape: " in line
+    assert "radius" in line
 
 
 # --- a full disk ---------------------------------------------------------------------------------

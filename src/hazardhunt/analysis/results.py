@@ -141,7 +141,7 @@ def load_results_of(
         if found.ledger_problem is not None and found.unfinished:
             ledger_problems.append(found.ledger_problem)
     summaries = [_read_json(path / "summary.json") for path in run_directories]
-    configs = [_read_json(path / "config.json") for path in run_directories]
+    configs = [_read_run_config(path / "config.json") for path in run_directories]
     runs = pd.DataFrame(summaries).drop(columns="checksums", errors="ignore")
     runs["directory"] = [str(path) for path in run_directories]
     runs["reward"] = [config.get("reward") for config in configs]
@@ -313,6 +313,14 @@ def _judge_tested_only(tables: dict[str, pd.DataFrame]) -> None:
     judged = [c for c in episodes.columns if str(c).startswith(REQUIREMENT_COLUMN)]
     if judged and "outcome" in episodes:
         episodes.loc[episodes["outcome"] == "sut_error", judged] = float("nan")
+
+
+def _read_run_config(path: Path) -> dict[str, Any]:
+    """A run's ``config.json``, read as data: a JSON object with a ``run`` table."""
+    config = _read_json(path)
+    if not isinstance(config.get("run"), dict):
+        raise ResultsError(f"{path}: not a run's configuration (no run table)")
+    return config
 
 
 def _read_json(path: Path) -> dict[str, Any]:

@@ -11,7 +11,8 @@ from typing import Any
 from pydantic import TypeAdapter, ValidationError
 from typing_extensions import TypedDict  # which pydantic validates on Python 3.11
 
-from hazardhunt.errors import HazardhuntError
+from hazardhunt.errors import HazardhuntError, InputError
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.textfiles import format_validation_error
 
 
@@ -136,6 +137,10 @@ def summary_problem(stored: dict[str, Any]) -> str | None:
         _RUN_SUMMARY.validate_python(stored, strict=True)
     except ValidationError as error:
         return format_validation_error(error)
+    try:  # what a report builds the run's field from
+        FieldShape(**stored.get("field_shape", {}))
+    except (TypeError, InputError) as error:
+        return f"field_shape: {error}"
     return None
 
 
