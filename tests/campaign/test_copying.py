@@ -182,6 +182,12 @@ def test_a_single_run_copies_and_copies_again_as_already_there(
     assert not (tmp_path / "run" / "trajectories").exists()
     again = hazardhunt("copy", run, "--out", tmp_path / "run")
     assert "0 runs copied, 1 already there" in again.stdout
+    # A copy whose summary.json no longer reads is copied anew, not a traceback.
+    (tmp_path / "run" / "summary.json").write_bytes(b"\xff{")
+    mended = hazardhunt("copy", run, "--out", tmp_path / "run")
+    assert mended.returncode == 0, mended.stderr
+    assert "1 run copied" in mended.stdout
+    assert find_damage(tmp_path / "run") is None
 
 
 def test_a_received_run_with_a_symbolic_link_is_not_copied_nor_followed(

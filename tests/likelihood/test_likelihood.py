@@ -537,6 +537,16 @@ def damaged_estimates_are_named_and_mend(directory, command):
     assert shown.returncode == 2, shown.stderr
     assert "most_likely names episode 1000000, which the batches do not hold" in shown.stderr
     (directory / "estimate.json").write_text(written)
+    configured = (directory / "config.json").read_bytes()
+    (directory / "config.json").write_bytes(b"\xff{")  # not UTF-8
+    shown = hazardhunt("report", directory, cwd=ROOT)
+    assert shown.returncode == 2, shown.stderr
+    assert (
+        shown.stderr.strip()
+        == f"error: {directory / 'config.json'}: (top level): Invalid JSON: "
+        + ("expected value at line 1 column 1")
+    )
+    (directory / "config.json").write_bytes(configured)
     batch = directory / "batches" / "00001.parquet"
     batch.write_bytes(batch.read_bytes()[:100])
     for again in (hazardhunt(*command, cwd=ROOT), hazardhunt("report", directory, cwd=ROOT)):

@@ -326,7 +326,7 @@ def _read_run_config(path: Path) -> dict[str, Any]:
 def _read_json(path: Path) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as error:
+    except (OSError, ValueError) as error:  # not JSON, or not UTF-8
         raise ResultsError(f"{path}: cannot be read ({error})") from error
     if not isinstance(data, dict):
         raise ResultsError(f"{path}: expected a JSON object")

@@ -137,12 +137,12 @@ def _keeping_runs(
 def _copy_if_new(
     source: Path, destination: Path, leave_out: tuple[str, ...], copied: Copied
 ) -> None:
-    if is_finished(destination):
+    if is_finished(destination) and find_damage(destination) is None:  # else copied anew
         mine = json.loads((destination / "summary.json").read_text())
         mine.pop(LEFT_OUT_KEY, None)
         theirs = json.loads((source / "summary.json").read_text())
         theirs.pop(LEFT_OUT_KEY, None)
-        if mine == theirs and find_damage(destination) is None:
+        if mine == theirs:
             copied.already_there.append(destination.name)
             return
     if destination.exists():

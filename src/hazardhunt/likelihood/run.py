@@ -434,7 +434,7 @@ def load_config(directory: Path) -> EstimateConfig:
     """
     path = directory / "config.json"
     try:
-        return EstimateConfig.model_validate_json(path.read_text())
+        return EstimateConfig.model_validate_json(path.read_bytes())  # not UTF-8: invalid JSON
     except OSError as error:
         raise InputError(f"{directory}: no estimate here ({error.strerror}: {path.name})") from None
     except ValidationError as error:
