@@ -318,6 +318,18 @@ def test_an_invalid_config_json_is_one_line_for_replay_and_export(
             lambda failures: failures.drop(columns="contact_face"),
             "failures.parquet lacks the column contact_face",
         ),
+        (
+            lambda failures: failures.assign(**{"class": 5}),
+            "failures.parquet: class holds a value that is not text",
+        ),
+        (
+            lambda failures: failures.assign(episode=-3),
+            "failures.parquet: episode holds a value that is not a whole number from 0",
+        ),
+        (
+            lambda failures: failures.assign(episode=10**6),
+            "failures.parquet: episode 1000000 is not an episode of episodes.parquet",
+        ),
     ],
 )
 def test_a_received_table_without_its_numbers_or_columns_is_named_damaged(

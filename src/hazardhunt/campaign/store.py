@@ -25,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -42,6 +41,7 @@ from hazardhunt.campaign.records import (
     requirement_count,
     summary_problem,
 )
+from hazardhunt.campaign.table_checks import table_problem
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -151,7 +151,7 @@ def find_damage(directory: Path) -> str | None:
         return f"summary.json: {problem}"
     recorded = summary.get("checksums")
     if recorded is None:
-        return _unreadable_file(directory) or _table_problem(directory)
+        return _unreadable_file(directory) or table_problem(directory)
     if not isinstance(recorded, dict):
         return "summary.json: checksums is not a table of files"
     left_out = summary.get(LEFT_OUT_KEY, [])
@@ -165,41 +165,7 @@ def find_damage(directory: Path) -> str | None:
             return f"{name} is missing"
         if _sha256(path) != digest:
             return f"{name} does not match its checksum (changed or truncated)"
-    return _table_problem(directory)
-
-
-REQUIRED_COLUMNS = {
-    "episodes.parquet": ("episode", "outcome"),
-    "failures.parquet": ("episode", "outcome", "sim_time", "contact_face", "max_risk", "class"),
-}
-"""Columns every run's tables have had, which reading results relies on."""
-FINITE_COLUMNS = {"failures.parquet": ("sim_time", "max_risk")}
-"""Columns whose every value is a finite number."""
-
-
-def _table_problem(directory: Path) -> str | None:
-    """What makes a run's tables unusable although they read back (a run received from
-    someone else, whose checksums match what they made): a missing column, or a number that
-    is not one where the results need one."""
-    for name, columns in REQUIRED_COLUMNS.items():
-        path = directory / name
-        if not path.is_file():
-            continue  # reported by the checksums, or a run recorded before the table existed
-        try:
-            present = set(pq.read_schema(path).names)
-        except (OSError, ValueError) as error:
-            return f"{name} cannot be read ({error})"
-        missing = [column for column in columns if column not in present]
-        if missing:
-            return f"{name} lacks the column {', '.join(missing)}"
-        finite = [column for column in FINITE_COLUMNS.get(name, ()) if column in present]
-        if finite:
-            table = pd.read_parquet(path, columns=finite)
-            for column in finite:
-                values = pd.to_numeric(table[column], errors="coerce")
-                if not values.map(math.isfinite).all():
-                    return f"{name}: {column} holds a value that is not a finite number"
-    return None
+    return table_problem(directory)
 
 
 def symbolic_link_in(directory: Path) -> str | None:
