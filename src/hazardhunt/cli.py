@@ -701,7 +701,6 @@ def report(
     holds no results (not a run or campaign, or no run has finished yet).
     """
     from hazardhunt.analysis.report import write_report
-    from hazardhunt.analysis.results import failed_runs
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
 
@@ -716,14 +715,14 @@ def report(
 
     spec = _plugin("--classifier", classifier, classifier_param)
     chosen = make_classifier(spec) if spec is not None or reclassify else None
-    _warn_of_left_out_runs(directory)
+    failed = _warn_of_left_out_runs(directory)
     with _transient_bar(console) as progress:
         task = progress.add_task("report", total=None)
         index = write_report(
             directory, lambda step: progress.update(task, description=f"report: {step}"), chosen
         )
     console.print(f"report written to [bold]{index.resolve()}[/bold]")
-    _exit_if_runs_failed(failed_runs(directory), "the report covers")
+    _exit_if_runs_failed(failed, "the report covers")
 
 
 @app.command(cls=_Command)
@@ -759,15 +758,13 @@ def export(
     the others, if any; 2 when the directory holds no results (not a run or campaign, or no
     run has finished yet).
     """
-    from hazardhunt.analysis.results import failed_runs
     from hazardhunt.cases import export_cases, write_pytest_module
 
     spec = _plugin("--classifier", classifier, classifier_param)
-    _warn_of_left_out_runs(directory)
+    failed = _warn_of_left_out_runs(directory)
     written = export_cases(directory, out, every_failure=all_failures, classifier=spec)
     cases = "1 case" if len(written) == 1 else f"{len(written)} cases"
     console.print(f"{cases} written to [bold]{out.resolve()}[/bold]")
-    failed = failed_runs(directory)
     if not written:
         held = "the runs that completed hold" if failed else "the results hold"
         console.print(f"{held} no failure")
@@ -840,15 +837,17 @@ def _print_failed(failed: dict[str, str]) -> None:
         err_console.print(f"[red]failed:[/red] {shown(run_id)}: {shown(error)}", highlight=False)
 
 
-def _warn_of_left_out_runs(directory: Path) -> None:
+def _warn_of_left_out_runs(directory: Path) -> dict[str, str]:
     """Name the runs of a campaign directory left out because their files are damaged, and
-    say so if its ledger does not read (its failed runs then read as not finished)."""
+    say so if its ledger does not read (its failed runs then read as not finished); the runs
+    that failed (run id -> error), which the command names once it has written what it covers.
+    The runs are classified (their files checked against their checksums) once per command."""
     from hazardhunt.analysis.results import ResultsError, run_states
 
     try:
         states = run_states(directory)
     except ResultsError:
-        return  # the command reports it
+        return {}  # the command reports it
     for run_id, damage in states.damaged.items():
         err_console.print(
             f"[yellow]warning:[/yellow] run {shown(run_id)} is damaged ({shown(damage)}) and "
@@ -861,6 +860,7 @@ def _warn_of_left_out_runs(directory: Path) -> None:
             f"the campaign {'has' if one else 'have'} not finished, and may have failed: the "
             f"campaign's ledger cannot tell ({shown(states.ledger_problem)})"
         )
+    return states.failed
 
 
 @app.command(cls=_Command)

@@ -23,7 +23,7 @@ import pytest
 
 from hazardhunt.analysis import report
 from hazardhunt.analysis.report import write_report
-from hazardhunt.analysis.results import damaged_runs
+from hazardhunt.analysis.results import run_states
 from hazardhunt.campaign import ledger as ledger_module
 from hazardhunt.campaign.campaign import CampaignFailed, run_campaign
 from hazardhunt.campaign.config import load_campaign
@@ -278,7 +278,7 @@ def test_a_truncated_table_is_named_by_report_and_export_and_redone_by_resume(
     assert f"run {damaged} is damaged" in resumed.stdout
     pd.testing.assert_frame_equal(run_tables(out / "runs" / damaged)[0], expected)
     assert {entry["status"] for entry in ledger(out).values()} == {"complete"}
-    assert damaged_runs(out) == {}
+    assert run_states(out).damaged == {}
 
 
 def test_a_damaged_run_directory_is_a_one_line_error_for_report_and_is_redone_by_run(

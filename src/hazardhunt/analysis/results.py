@@ -213,26 +213,6 @@ def recorded_classifier(config: dict[str, Any], path: Path) -> PluginSpec | None
         raise ResultsError(f"{path}: run.{format_validation_error(error)}") from None
 
 
-def damaged_runs(directory: Path) -> dict[str, str]:
-    """The finished runs of a run or campaign directory whose files are damaged: run id -> what
-    is wrong (what :func:`load_results` leaves out, or refuses for a run directory).
-
-    Raises:
-        ResultsError: When ``directory`` is neither a run nor a campaign directory.
-    """
-    return run_states(directory).damaged
-
-
-def failed_runs(directory: Path) -> dict[str, str]:
-    """The runs of a campaign directory that failed: run id -> the error its ledger records
-    (what :func:`load_results` leaves out and lists in ``failed``); empty for a run directory.
-
-    Raises:
-        ResultsError: When ``directory`` is neither a run nor a campaign directory.
-    """
-    return run_states(directory).failed
-
-
 def run_states(directory: Path) -> RunStates:
     """The runs of a run or campaign directory, by how they stand.
 

@@ -58,8 +58,6 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
         )
     try:
         summary = json.loads(path.read_text())
-        if not isinstance(summary, dict) or not isinstance(summary.get("probability"), dict):
-            raise ValueError("not an estimate's summary")
         if (problem := estimate_record_problem(summary)) is not None:
             raise ValueError(f"not an estimate's summary: {problem}")
     except (OSError, UnicodeDecodeError, ValueError) as error:  # JSONDecodeError too

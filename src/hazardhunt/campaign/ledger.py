@@ -77,10 +77,7 @@ def read_ledger(out: Path) -> tuple[list[LedgerEntry], str | None]:
     entries = [
         cast(LedgerEntry, entry)
         for entry in runs
-        if isinstance(entry, dict)
-        and isinstance(entry.get("run_id"), str)
-        and isinstance(entry.get("status"), str)
-        and ledger_entry_problem(entry) is None
+        if ledger_entry_problem(entry) is None and {"run_id", "status"} <= entry.keys()
     ]
     return entries, None
 

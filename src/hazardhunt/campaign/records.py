@@ -195,9 +195,9 @@ def campaign_totals(entries: list[LedgerEntry]) -> CampaignTotals:
     }
 
 
-def ledger_entry_problem(entry: dict[str, Any]) -> str | None:
-    """What is wrong with ``entry`` as a run's entry of a campaign's ledger, or None: a key
-    that holds a value of another type than the ledger writes."""
+def ledger_entry_problem(entry: object) -> str | None:
+    """What is wrong with ``entry`` as a run's entry of a campaign's ledger, or None: not a
+    table, or a key that holds a value of another type than the ledger writes."""
     try:
         _LEDGER_ENTRY.validate_python(entry, strict=True)
     except ValidationError as error:

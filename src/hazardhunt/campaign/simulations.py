@@ -69,6 +69,25 @@ def check_sut(config: RunConfig) -> None:
             on the trial episode: one line naming the plug-in, the method and the error.
         ConfigError: The periods do not fit.
     """
-    if config.controller is None and config.safety_layer is None:
+    try_sut(config.scenario, config.field, config.env, config.controller, config.safety_layer)
+
+
+def try_sut(
+    scenario: str,
+    field: str,
+    options: EnvOptions,
+    controller: PluginSpec | None,
+    safety_layer: PluginSpec | None,
+    before: str = "the run",
+) -> None:
+    """The trial episode of :func:`check_sut` for the SUT these settings describe, which
+    precedes ``before``; nothing when it is the built-in one.
+
+    Raises:
+        PluginError: As :func:`check_sut`.
+        ConfigError: The periods do not fit.
+    """
+    if controller is None and safety_layer is None:
         return
-    try_plugins(simulation_of(config), config.controller, config.safety_layer)
+    trial = build_simulation(scenario, field, options, controller, safety_layer)
+    try_plugins(trial, controller, safety_layer, before)

@@ -60,15 +60,13 @@ def _values_problem(name: str, table: pa.Table) -> str | None:
         return None
     for column in FINITE_COLUMNS.get(name, ()):
         values = table[column]
-        if not (pa.types.is_integer(values.type) or pa.types.is_floating(values.type)) or not (
-            values.null_count == 0 and pc.all(pc.is_finite(values)).as_py()
-        ):
+        numbers = pa.types.is_integer(values.type) or pa.types.is_floating(values.type)
+        if not numbers or values.null_count or not pc.all(pc.is_finite(values)).as_py():
             return f"{name}: {column} holds a value that is not a finite number"
     for column in TEXT_COLUMNS.get(name, ()):
         values = table[column]
-        if not pa.types.is_string(values.type) and not pa.types.is_large_string(values.type):
-            return f"{name}: {column} holds a value that is not text"
-        if values.null_count:
+        text = pa.types.is_string(values.type) or pa.types.is_large_string(values.type)
+        if not text or values.null_count:
             return f"{name}: {column} holds a value that is not text"
     episodes = table["episode"]
     if (

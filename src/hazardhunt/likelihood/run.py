@@ -27,8 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from hazardhunt.campaign.config import EnvOptions, first_difference, scenario_field
 from hazardhunt.campaign.plugins import PluginSpec
-from hazardhunt.campaign.simulations import build_simulation
-from hazardhunt.campaign.trial import try_plugins
+from hazardhunt.campaign.simulations import build_simulation, try_sut
 from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.encounters import (
@@ -211,12 +210,10 @@ class EstimateRun:
         self.workers = workers if source is None else 1
         if source is None:
             encounters = encounters_of(config)
-            if config.controller is not None or config.safety_layer is not None:
-                # On a SUT of its own, as in a worker process: a plug-in that keeps state from
-                # one episode to the next plays the estimate's first episode as its first.
-                sut = (config.controller, config.safety_layer)
-                trial = build_simulation(config.scenario, config.field, config.env, *sut)
-                try_plugins(trial, *sut, "the estimate")
+            # On a SUT of its own, as in a worker process: a plug-in that keeps state from one
+            # episode to the next plays the estimate's first episode as its first.
+            sut = (config.controller, config.safety_layer)
+            try_sut(config.scenario, config.field, config.env, *sut, "the estimate")
             source = encounters
         self.source = source
         self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
