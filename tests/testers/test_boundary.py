@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 
 from hazardhunt.sim.simulation import Simulation
+from hazardhunt.spec.failure_classes import MechanismClassifier
 from hazardhunt.sut.pursuit import PursuitController
 from hazardhunt.testers.boundary import BoundaryParams, BoundarySampler
 from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.mirror import failure_cell
 from hazardhunt.testers.search import SearchContext
 from hazardhunt.testers.spaces import DecisionSpace
 
@@ -102,3 +104,29 @@ def test_saved_ends_change_nothing_where_no_safety_layer_ever_stops_the_robot(si
     assert len(plain) >= 12
     for with_ends, without in zip(lines(True), plain, strict=True):
         np.testing.assert_array_equal(with_ends, without)
+
+
+@pytest.mark.parametrize("cell_border", [False, True])
+def test_with_cell_border_a_failure_of_another_cell_is_a_far_end(sim, cell_border):
+    left = Plan(DecisionSpace("aim"), np.tile([1.0, 0.5, -1.0], (sim.horizon, 1)))
+    right = Plan(DecisionSpace("aim"), np.tile([1.0, -0.5, -1.0], (sim.horizon, 1)))
+    on_left, on_right = play(sim, [left, right])
+    assert on_left.outcome == on_right.outcome == "failure"
+    moving = MechanismClassifier(robot=sim.robot_params).moving_speed
+    assert failure_cell(on_left.summary, moving) != failure_cell(on_right.summary, moving)
+    params = BoundaryParams(batch_size=1, cell_border=cell_border)
+    sampler = BoundarySampler(params, SearchContext(sim, seed=0))
+    sampler.observe([left], [on_left])
+    [perturbed] = sampler.ask()
+    [line] = sampler.lines
+    # The perturbation is told it failed as the right-hand attack did: in another cell.
+    sampler.tell([perturbed], [on_right])
+    [after] = sampler.ask()
+    inside = sampler._padded(on_left.actions)
+    midpoint = 0.5 * (inside + perturbed.decisions)
+    if cell_border:  # the other mechanism's failure ended the search: bisection begins
+        np.testing.assert_allclose(after.decisions, midpoint)
+        assert line.outside is not None
+    else:  # a failure is a failure: the line goes on looking for an episode that does not fail
+        assert line.outside is None
+        assert not np.allclose(after.decisions, midpoint)

@@ -22,6 +22,15 @@ already followed). It works on the actions the episodes played, read in the open
 space, so it bisects between episodes of any sampler. It is an arm of the default portfolio
 (:mod:`hazardhunt.testers.portfolio`) and proposes nothing until some arm finds a failure.
 
+With ``cell_border``, a line closes in on the border of its failure's cell instead: an
+episode counts as on the failure's side only if it fails in the cell the line started in, so
+that a failure of another cell ends the search for a far end as an episode that does not fail
+does, and bisection lands on the border between two mechanisms as well as on the border of the
+failures. Such a far end that fails is itself a failure of a cell the line had not started
+from, and starts lines of its own if it is the first in its cell. It finds more failures near
+the borders between mechanisms and, on the systems it was not chosen on, not more classes
+(docs/search-methods.md, "Bisecting to a cell's border, paying for repeats"): off by default.
+
 With ``saved_ends``, every second line skips the perturbations: its far end is the episode
 nearest its failure (in the actions played) in which the safety layer stopped the robot and
 nothing failed, one any sampler played. Between a failure the safety layer never saw and an
@@ -63,6 +72,10 @@ class BoundaryParams(SearchParams):
     """Perturbations a line tries before it gives up on its failure."""
     steps: int = Field(default=8, ge=1, le=50)
     """Bisection steps per line."""
+    cell_border: bool = False
+    """A line closes in on the border of its failure's descriptor cell rather than of the
+    failures: an episode counts as inside only if it fails in the cell the line started in, so
+    that its far end may be a failure of another mechanism."""
     saved_ends: bool = False
     """Every second line bisects towards the nearest episode the safety layer saved (an
     emergency stop, no failure) instead of a perturbation of its failure, once there is one."""
@@ -140,12 +153,12 @@ class BoundarySampler:
             played = line.pending
             assert played is not None
             line.pending = None
-            failed = self.objective.hit(result)
+            inside = self._inside(line, result)
             if line.outside is None:
                 line.tries += 1
-                if not failed:
+                if not inside:
                     line.outside = played
-            elif failed:
+            elif inside:
                 line.inside, line.steps = played, line.steps + 1
             else:
                 line.outside, line.steps = played, line.steps + 1
@@ -174,6 +187,14 @@ class BoundarySampler:
             return None
         distances = [float(np.sum((saved - start) ** 2)) for saved in self.saved]
         return self.saved[int(np.argmin(distances))]
+
+    def _inside(self, line: _Line, result: EpisodeResult) -> bool:
+        """Whether an episode of ``line`` lies on its failure's side of the border."""
+        if not self.objective.hit(result):
+            return False
+        if not self.params.cell_border:
+            return True
+        return failure_cell(result.summary, self.moving_speed) == line.cell
 
     def _finished(self, line: _Line) -> bool:
         if line.outside is None:
