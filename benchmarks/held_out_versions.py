@@ -1,0 +1,54 @@
+"""Versions of a tester side by side on the held-out mutants, from a result file.
+
+Reads a file of runs (``benchmarks/results/held_out_classes_cell_border.json``: one row per
+``hazardhunt run ... --controller hazardhunt.benchmark.held_out:M``, with the version's name,
+the case, the failures, the classes and the first failure) and prints, per field and version,
+against ``--against``: the classes found over the runs (``other`` left out), the runs with more
+and fewer classes, the failures, and the runs whose first failure came at another episode.
+Prints Markdown; needs only the standard library.
+
+    python benchmarks/held_out_versions.py benchmarks/results/held_out_classes_cell_border.json \\
+        --against "second default (repeat_gain 0.03)"
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+OTHER = "other"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("file", type=Path)
+    parser.add_argument("--against", required=True, help="the version the others are held to")
+    args = parser.parse_args()
+    runs = json.loads(args.file.read_text())["runs"]
+    key = {id(r): (r["controller"], r["scenario"], r["field"], r["seed"]) for r in runs}
+    base = {key[id(r)]: r for r in runs if r["version"] == args.against}
+    print("| field | version | runs | classes | more / fewer | failures | first failure moved |")
+    print("|---|---|---|---|---|---|---|")
+    for field in sorted({r["field"] for r in runs}):
+        versions = sorted({r["version"] for r in runs if r["field"] == field} - {args.against})
+        for version in [args.against, *versions]:
+            rows = [r for r in runs if r["version"] == version and r["field"] == field]
+            pairs = [(r, base[key[id(r)]]) for r in rows if key[id(r)] in base]
+            classes = sum(counted(r) for r, _ in pairs)
+            more = sum(counted(r) > counted(b) for r, b in pairs)
+            fewer = sum(counted(r) < counted(b) for r, b in pairs)
+            failures = sum(r["failures"] for r, _ in pairs)
+            moved = sum(r["first_failure_episode"] != b["first_failure_episode"] for r, b in pairs)
+            cells = [field, version, len(pairs), classes, f"{more} / {fewer}", f"{failures:,}"]
+            print("| " + " | ".join(str(c) for c in [*cells, moved]) + " |")
+
+
+def counted(row: dict[str, Any]) -> int:
+    """The classes a run found, ``other`` left out."""
+    return len(set(row["classes"]) - {OTHER})
+
+
+if __name__ == "__main__":
+    main()
