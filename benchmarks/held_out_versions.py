@@ -1,6 +1,6 @@
-"""Versions of a tester side by side on the held-out mutants, from a result file.
+"""Versions of a tester side by side on the held-out mutants, from result files.
 
-Reads a file of runs (``benchmarks/results/held_out_classes_cell_border.json``: one row per
+Reads files of runs (``benchmarks/results/held_out_classes_*.json``: one row per
 ``hazardhunt run ... --controller hazardhunt.benchmark.held_out:M``, with the version's name,
 the case, the failures, the classes and the first failure) and prints, per field and version,
 against ``--against``: the classes found over the runs (``other`` left out), the runs with more
@@ -8,6 +8,7 @@ and fewer classes, the failures, and the runs whose first failure came at anothe
 Prints Markdown; needs only the standard library.
 
     python benchmarks/held_out_versions.py benchmarks/results/held_out_classes_cell_border.json \\
+        benchmarks/results/held_out_classes_fit_offsets.json \\
         --against "second default (repeat_gain 0.03)"
 """
 
@@ -23,10 +24,10 @@ OTHER = "other"
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("file", type=Path)
+    parser.add_argument("files", nargs="+", type=Path)
     parser.add_argument("--against", required=True, help="the version the others are held to")
     args = parser.parse_args()
-    runs = json.loads(args.file.read_text())["runs"]
+    runs = [run for file in args.files for run in json.loads(file.read_text())["runs"]]
     key = {id(r): (r["controller"], r["scenario"], r["field"], r["seed"]) for r in runs}
     base = {key[id(r)]: r for r in runs if r["version"] == args.against}
     print("| field | version | runs | classes | more / fewer | failures | first failure moved |")

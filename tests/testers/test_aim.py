@@ -17,8 +17,9 @@ from hazardhunt.testers.aim import (
     aimed_action,
     route_point,
 )
-from hazardhunt.testers.spaces import DecisionSpace
+from hazardhunt.testers.spaces import DecisionSpace, SearchSpace
 from hazardhunt.world.geometry import point_in_body_frame, point_rectangle_clearance
+from hazardhunt.world.navigation import MARGIN
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +101,52 @@ def test_a_route_point_lies_beside_the_route_at_its_share(sim):
     np.testing.assert_allclose(
         route_point(sim, 0.5, ROUTE_OFFSET_MAX), (start + goal) / 2 + [0.0, ROUTE_OFFSET_MAX]
     )
+
+
+def test_with_fitted_offsets_a_point_beside_the_aisle_is_its_edge(sim):
+    # The main aisle is 3 m wide (y 8.5 to 11.5) except where the cross aisle crosses it (x 8.5
+    # to 11.5). A tenth along the route, 3 m to the left lies in a shelf block: fitted, the
+    # point is the aisle's edge, the human disc the margin clear of the block.
+    floor, radius = sim.scenario.floor, sim.human_params.radius
+    x, y = route_point(sim, 0.1, ROUTE_OFFSET_MAX)
+    assert floor.disc_blocked_at(x, y, radius)
+    x, y = route_point(sim, 0.1, ROUTE_OFFSET_MAX, fit=True)
+    assert y == pytest.approx(11.5 - radius - MARGIN, abs=0.01)
+    assert not floor.disc_blocked_at(x, y, radius + MARGIN)
+    np.testing.assert_allclose(
+        route_point(sim, 0.1, -ROUTE_OFFSET_MAX, fit=True), [x, 20.0 - y], atol=0.01
+    )
+    # In the cross aisle, or nearer than the edge, the point is where it was.
+    for share, offset in ((0.5, ROUTE_OFFSET_MAX), (0.1, 0.5), (0.1, 0.0)):
+        np.testing.assert_array_equal(
+            route_point(sim, share, offset, fit=True), route_point(sim, share, offset)
+        )
+
+
+def test_fitted_offsets_reach_every_decision_space_a_searcher_plays():
+    space = SearchSpace.model_validate({"kind": "mixed", "detour": True, "fit_offsets": True})
+    assert [each.fit_offsets for each in space.decision_spaces] == [True, True, True]
+    assert not any(each.fit_offsets for each in SearchSpace(kind="mixed").decision_spaces)
+
+
+def test_with_fitted_offsets_the_plain_ambush_at_the_goal_waits_at_the_aisle_edge():
+    # The plain ambushes wait 3 m beside the route. At the goal that is inside a shelf block:
+    # walked to as it is, the human ends up at the free place nearest it, round the block and
+    # out of the aisle; fitted, it waits at the aisle's edge beside the goal.
+    sim = Simulation.build("overtaking", "none", controller=PursuitController())
+    plan = [1.0, 1.0, 1.0, 1.0, 0.0]  # at the goal, on the left, running 3 m before abreast
+    lead = sim.route.length - LEAD_MAX
+
+    def waiting(space: DecisionSpace) -> tuple[float, float]:
+        sim.reset()
+        while sim.route.project(np.array([sim.robot.x, sim.robot.y])) < lead:
+            assert sim.decide(space.action(sim, np.array(plan))).outcome is None
+        return sim.human_position
+
+    x, y = waiting(DecisionSpace("ambush", detour=True, fit_offsets=True))
+    assert (x, y) == pytest.approx((18.0, 11.5 - sim.human_params.radius - MARGIN), abs=0.05)
+    x, y = waiting(DecisionSpace("ambush", detour=True))
+    assert not 8.5 < y < 11.5 or x > 18.5  # out of the aisle
 
 
 def test_a_human_sent_onto_the_route_waits_there_and_the_robot_runs_into_it(sim):

@@ -101,6 +101,7 @@ def test_a_batch_on_two_worker_processes_gives_the_same_run(played, tmp_path):
         ("cem", {"space": {"kind": ["mixed"]}}, r"space.kind: .* not \['mixed'\]"),
         ("cem", {"space": {"kind": "aim", "detours": True}}, "space.detours: unknown setting"),
         ("cem", {"space": 3, "clear_path": True}, "space: must be a table, not 3"),
+        ("cem", {"space": {"kind": "route", "fit_offsets": 1}}, "space.fit_offsets: must be true"),
         ("cem", {"noise_exponent": -1}, "noise_exponent: must be greater than or equal to 0"),
         ("cem", {"n_workers": 65}, r"n_workers \(now workers\): must be less than or equal to 64"),
         ("cem", {"workers": 65}, "workers: must be less than or equal to 64, not 65"),

@@ -90,42 +90,63 @@ def aimed_action(
     return walk_towards(simulation, target, wanted_speed, detour)
 
 
-def route_point(simulation: Simulation, along: float, offset: float) -> NDArray[np.float64]:
+def route_point(
+    simulation: Simulation, along: float, offset: float, fit: bool = False
+) -> NDArray[np.float64]:
     """The point ``offset`` (m, positive to the left) beside the robot's route, at the share
-    ``along`` (0 the start, 1 the goal) of the route's length."""
+    ``along`` (0 the start, 1 the goal) of the route's length.
+
+    With ``fit``, a point the human does not fit at (in a wall or a shelf) is pulled back
+    towards the route, to the last place it fits on the way out: in an aisle narrower than
+    the offset, the aisle's edge. Without it such a point is walked to as it is, which leaves
+    the human wherever the nearest free place is, behind the shelf as often as not.
+    """
     route = simulation.route
     x, y, tangent_x, tangent_y = route.frame_at(along * route.length)
+    if fit and offset != 0.0:
+        grid = simulation.scenario.floor.walk_grid(simulation.human_params.radius)
+        side = math.copysign(1.0, offset)
+        outwards = np.array([-side * tangent_y, side * tangent_x])
+        offset = side * grid.reach(np.array([x, y]), outwards, abs(offset))
     return np.array([x - offset * tangent_y, y + offset * tangent_x])
 
 
 def route_action(
-    simulation: Simulation, decision: NDArray[np.floating[Any]], detour: bool = False
+    simulation: Simulation,
+    decision: NDArray[np.floating[Any]],
+    detour: bool = False,
+    fit: bool = False,
 ) -> NDArray[np.float32]:
     """The normalised (speed, turn rate) action that walks the human, over the next decision
     period, towards the point of the robot's route ``decision`` (speed, share of the route,
     offset beside it in [-1, 1]) names (round the obstacles with ``detour``:
-    :func:`walk_towards`)."""
+    :func:`walk_towards`; pulled back to where the human fits with ``fit``:
+    :func:`route_point`)."""
     wanted_speed, along, offset = np.clip(np.asarray(decision, dtype=np.float64), -1.0, 1.0)
-    target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX)
+    target = route_point(simulation, 0.5 * (along + 1.0), offset * ROUTE_OFFSET_MAX, fit)
     return walk_towards(simulation, target, wanted_speed, detour)
 
 
 def ambush_action(
-    simulation: Simulation, decision: NDArray[np.floating[Any]], detour: bool = False
+    simulation: Simulation,
+    decision: NDArray[np.floating[Any]],
+    detour: bool = False,
+    fit: bool = False,
 ) -> NDArray[np.float32]:
     """The normalised (speed, turn rate) action of an ambush ``decision`` (speed, share of the
     route, offset beside it, lead, place on the robot's side, in [-1, 1]): towards the waiting
     point beside the route until the robot's centre (the route point nearest it) comes within
     the lead of it, then at the robot's side that faces the human, aimed as
     :func:`aimed_action` aims (a quarter turn from the robot's heading, an eighth turn more
-    towards its rear or its front)."""
+    towards its rear or its front). With ``fit`` the waiting point is pulled back to where
+    the human fits (:func:`route_point`)."""
     wanted_speed, along, offset, lead, at = np.clip(
         np.asarray(decision, dtype=np.float64), -1.0, 1.0
     )
     route, robot = simulation.route, simulation.robot
     share = 0.5 * (along + 1.0)
     if route.project(np.array([robot.x, robot.y])) < share * route.length - lead * LEAD_MAX:
-        target = route_point(simulation, share, offset * ROUTE_OFFSET_MAX)
+        target = route_point(simulation, share, offset * ROUTE_OFFSET_MAX, fit)
         return walk_towards(simulation, target, wanted_speed, detour)
     x, y, _ = simulation.human_pose
     _, left = point_in_body_frame(x, y, robot.x, robot.y, robot.heading)

@@ -16,12 +16,14 @@ the human's action:
 ``detour`` makes any of them keep the human clear of walls and shelves
 (:func:`~hazardhunt.testers.clear_path.clear_action`), and makes the closed-loop ones walk round
 an obstacle between the human and its target (:mod:`hazardhunt.world.navigation`) instead of
-stopping at it.
+stopping at it. ``fit_offsets`` makes ``route`` and ``ambush`` pull a point beside the route
+that lies in a wall or a shelf back towards the route, to where the human fits: beside a 3 m
+aisle, an offset of up to 3 m then means "up to the aisle's edge".
 
 A :class:`SearchSpace` is what a searcher is configured with: one kind, or ``mixed`` (every
-kind in turn), the detour, and whether the search starts from the plain attacks
-(:meth:`DecisionSpace.plain_attacks`). In a campaign file: ``space = "aim"`` or
-``space = { kind = "aim", detour = true, plain_attacks = true }``.
+kind in turn), the detour, the fitted offsets, and whether the search starts from the plain
+attacks (:meth:`DecisionSpace.plain_attacks`). In a campaign file: ``space = "aim"`` or
+``space = { kind = "ambush", detour = true, plain_attacks = true, fit_offsets = true }``.
 
 Every space plays the actions it chooses, and the episode records those, so an episode replays
 exactly without knowing its space.
@@ -57,11 +59,10 @@ SPACE_KINDS = (*DECISION_KINDS, "mixed")
 
 _SIZES: dict[str, int] = {"open": 2, "aim": 3, "route": 3, "ambush": 5}
 
-_STEERING: dict[str, Callable[[Simulation, NDArray[np.floating[Any]], bool], NDArray[Any]]] = {
-    "aim": aimed_action,
-    "route": route_action,
-    "ambush": ambush_action,
-}
+_BESIDE_ROUTE: dict[
+    str, Callable[[Simulation, NDArray[np.floating[Any]], bool, bool], NDArray[Any]]
+] = {"route": route_action, "ambush": ambush_action}
+"""The kinds whose decisions name a point beside the robot's route, and their steering."""
 
 _MIRRORED_NUMBER = {"open": 1, "aim": 1, "route": 2, "ambush": 2}
 """Per kind, the number of a decision whose sign mirrors it left for right: the turn rate, the
@@ -87,6 +88,10 @@ class DecisionSpace:
     """``open``, ``aim``, ``route`` or ``ambush`` (module docstring)."""
     detour: bool = False
     """Whether the human keeps clear of walls and shelves, and walks round them to a target."""
+    fit_offsets: bool = False
+    """Whether a point beside the robot's route (``route``, ``ambush``) that the human does not
+    fit at is pulled back towards the route to the last place it fits
+    (:func:`~hazardhunt.testers.aim.route_point`)."""
 
     @property
     def size(self) -> int:
@@ -98,8 +103,12 @@ class DecisionSpace:
     ) -> NDArray[np.float32]:
         """The normalised (speed, turn rate) action ``decision`` stands for where the human and
         the robot are in ``simulation`` now."""
-        steer = _STEERING.get(self.kind)
-        action = decision if steer is None else steer(simulation, decision, self.detour)
+        if self.kind == "open":
+            action = decision
+        elif self.kind == "aim":
+            action = aimed_action(simulation, decision, self.detour)
+        else:
+            action = _BESIDE_ROUTE[self.kind](simulation, decision, self.detour, self.fit_offsets)
         if self.detour:
             return clear_action(simulation, action)
         return np.asarray(action, np.float32)
@@ -134,7 +143,8 @@ class DecisionSpace:
         ``aim``); wait on its route, or 3 m to either side of it, at the start, the middle or
         the goal of its mission, where a controller switches modes (9 in ``route``); wait 3 m
         to either side of the route there and run at the robot's side 3 m before it comes
-        abreast, as it does or 3 m after (18 in ``ambush``).
+        abreast, as it does or 3 m after (18 in ``ambush``); with :attr:`fit_offsets`, 3 m
+        or the aisle's edge, whichever is nearer.
         """
         values = itertools.product(*_BOUNDARY_VALUES[self.kind])
         plans = np.array([(1.0, *numbers) for numbers in values])
@@ -155,6 +165,11 @@ class SearchSpace(BaseModel):
     plain_attacks: bool = False
     """Whether the search starts with each decision space's plain attacks
     (:meth:`DecisionSpace.plain_attacks`: 3, 12, 9 and 18 episodes)."""
+    fit_offsets: bool = False
+    """Whether a point beside the robot's route (``route``, ``ambush``) that lies in a wall or
+    a shelf is pulled back towards the route, to the last place the human fits: in an aisle
+    narrower than the offsets, its edge. Without it the human walks to the free place nearest
+    the point, behind the shelf as often as not."""
 
     @model_validator(mode="before")
     @classmethod
@@ -188,7 +203,7 @@ class SearchSpace(BaseModel):
             kinds = self.kind
         else:
             kinds = MIXED_KINDS if self.kind == "mixed" else (self.kind,)
-        return tuple(DecisionSpace(kind, self.detour) for kind in kinds)
+        return tuple(DecisionSpace(kind, self.detour, self.fit_offsets) for kind in kinds)
 
     @property
     def largest_size(self) -> int:
