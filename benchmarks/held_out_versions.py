@@ -32,8 +32,7 @@ def main() -> None:
     runs = [run for file in args.files for run in json.loads(file.read_text())["runs"]]
     if args.seeds is not None:
         runs = [run for run in runs if run["seed"] in args.seeds]
-    key = {id(r): (r["controller"], r["scenario"], r["field"], r["seed"]) for r in runs}
-    base = {key[id(r)]: r for r in runs if r["version"] == args.against}
+    base = {case(r): r for r in runs if r["version"] == args.against}
     print(
         "| field | version | runs | classes (--against: same runs) | more / fewer "
         "| failures (--against: same runs) | first failure moved |"
@@ -43,7 +42,7 @@ def main() -> None:
         versions = sorted({r["version"] for r in runs if r["field"] == field} - {args.against})
         for version in [args.against, *versions]:
             rows = [r for r in runs if r["version"] == version and r["field"] == field]
-            pairs = [(r, base[key[id(r)]]) for r in rows if key[id(r)] in base]
+            pairs = [(r, base[case(r)]) for r in rows if case(r) in base]
             classes = f"{sum(counted(r) for r, _ in pairs)}"
             failures = f"{sum(r['failures'] for r, _ in pairs):,}"
             if version != args.against:  # beside the other's over the same runs
@@ -54,6 +53,11 @@ def main() -> None:
             moved = sum(r["first_failure_episode"] != b["first_failure_episode"] for r, b in pairs)
             cells = [field, version, len(pairs), classes, f"{more} / {fewer}", failures]
             print("| " + " | ".join(str(c) for c in [*cells, moved]) + " |")
+
+
+def case(row: dict[str, Any]) -> tuple[str, str, str, int]:
+    """The controller, scenario, field and seed a run was played on."""
+    return (row["controller"], row["scenario"], row["field"], row["seed"])
 
 
 def counted(row: dict[str, Any]) -> int:

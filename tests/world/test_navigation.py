@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hazardhunt.world.floor import FloorMap, Obstacle
-from hazardhunt.world.navigation import MARGIN
+from hazardhunt.world.navigation import MARGIN, reach
 from hazardhunt.world.scenario import load_scenario
 
 RADIUS = 0.25
@@ -76,14 +76,13 @@ def test_the_grid_is_built_once_per_radius():
 
 def test_the_reach_ends_where_the_disc_would_come_within_the_margin_of_a_wall():
     floor = wall_with_a_gap()
-    grid = floor.walk_grid(RADIUS)
     east = np.array([1.0, 0.0])
     # From x 2 towards the wall at x 4.9: the disc keeps MARGIN clear up to x 4.9 - r - MARGIN.
-    reach = grid.reach(np.array([2.0, 2.0]), east, 6.0)
-    assert reach == pytest.approx(4.9 - RADIUS - MARGIN - 2.0, abs=0.01)
-    assert not floor.disc_blocked_at(2.0 + reach, 2.0, RADIUS + MARGIN)
+    far = reach(floor, RADIUS, np.array([2.0, 2.0]), east, 6.0)
+    assert far == pytest.approx(4.9 - RADIUS - MARGIN - 2.0, abs=0.01)
+    assert not floor.disc_blocked_at(2.0 + far, 2.0, RADIUS + MARGIN)
     # Short of the wall, or through the gap, the whole length.
-    assert grid.reach(np.array([2.0, 2.0]), east, 1.0) == 1.0
-    assert grid.reach(np.array([2.0, 9.0]), east, 6.0) == 6.0
+    assert reach(floor, RADIUS, np.array([2.0, 2.0]), east, 1.0) == 1.0
+    assert reach(floor, RADIUS, np.array([2.0, 9.0]), east, 6.0) == 6.0
     # Where the disc does not fit to begin with, nothing.
-    assert grid.reach(np.array([5.0, 2.0]), east, 3.0) == 0.0
+    assert reach(floor, RADIUS, np.array([5.0, 2.0]), east, 3.0) == 0.0

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.testers.clear_path import human_path
 from hazardhunt.world.geometry import point_in_body_frame
+from hazardhunt.world.navigation import reach
 
 STANDOFF_MAX = 3.0
 """The farthest a decision aims from the robot's outline, in m."""
@@ -104,10 +105,10 @@ def route_point(
     route = simulation.route
     x, y, tangent_x, tangent_y = route.frame_at(along * route.length)
     if fit and offset != 0.0:
-        grid = simulation.scenario.floor.walk_grid(simulation.human_params.radius)
         side = math.copysign(1.0, offset)
         outwards = np.array([-side * tangent_y, side * tangent_x])
-        offset = side * grid.reach(np.array([x, y]), outwards, abs(offset))
+        floor, radius = simulation.scenario.floor, simulation.human_params.radius
+        offset = side * reach(floor, radius, np.array([x, y]), outwards, abs(offset))
     return np.array([x - offset * tangent_y, y + offset * tangent_x])
 
 

@@ -59,11 +59,6 @@ SPACE_KINDS = (*DECISION_KINDS, "mixed")
 
 _SIZES: dict[str, int] = {"open": 2, "aim": 3, "route": 3, "ambush": 5}
 
-_BESIDE_ROUTE: dict[
-    str, Callable[[Simulation, NDArray[np.floating[Any]], bool, bool], NDArray[Any]]
-] = {"route": route_action, "ambush": ambush_action}
-"""The kinds whose decisions name a point beside the robot's route, and their steering."""
-
 _MIRRORED_NUMBER = {"open": 1, "aim": 1, "route": 2, "ambush": 2}
 """Per kind, the number of a decision whose sign mirrors it left for right: the turn rate, the
 bearing around the robot, the offset beside its route (where the ambush waits)."""
@@ -107,8 +102,10 @@ class DecisionSpace:
             action = decision
         elif self.kind == "aim":
             action = aimed_action(simulation, decision, self.detour)
+        elif self.kind == "route":
+            action = route_action(simulation, decision, self.detour, self.fit_offsets)
         else:
-            action = _BESIDE_ROUTE[self.kind](simulation, decision, self.detour, self.fit_offsets)
+            action = ambush_action(simulation, decision, self.detour, self.fit_offsets)
         if self.detour:
             return clear_action(simulation, action)
         return np.asarray(action, np.float32)

@@ -77,36 +77,6 @@ class WalkGrid:
         )
         return self.floor.discs_clear(points, self.radius)
 
-    def reach(
-        self, start: NDArray[np.floating[Any]], direction: NDArray[np.floating[Any]], length: float
-    ) -> float:
-        """How far from ``start``, along the unit vector ``direction`` and at most ``length``,
-        the disc keeps ``MARGIN`` clear of every obstacle: to the first place it would not, to
-        a centimetre (0 when it does not at ``start``)."""
-        origin = np.asarray(start, dtype=np.float64)
-        heading = np.asarray(direction, dtype=np.float64)
-
-        def blocked(distance: float) -> bool:
-            x, y = origin + distance * heading
-            return self.floor.disc_blocked_at(float(x), float(y), self.radius + MARGIN)
-
-        step = 0.5 * CELL
-        free = 0.0
-        while free < length:
-            ahead = min(free + step, length)
-            if blocked(ahead):
-                break
-            free = ahead
-        else:
-            return float(length)
-        if free == 0.0 and blocked(0.0):
-            return 0.0
-        ahead = min(free + step, length)
-        while ahead - free > 0.01:
-            middle = 0.5 * (free + ahead)
-            free, ahead = (free, middle) if blocked(middle) else (middle, ahead)
-        return free
-
     def waypoint(
         self, start: NDArray[np.floating[Any]], target: NDArray[np.floating[Any]]
     ) -> tuple[NDArray[np.float64], float]:
@@ -183,3 +153,39 @@ def _grid_graph(free: NDArray[np.bool_]) -> csr_matrix:
         (np.concatenate(weights), (np.concatenate(starts), np.concatenate(ends))),
         shape=(size, size),
     ).tocsr()
+
+
+def reach(
+    floor: FloorMap,
+    radius: float,
+    start: NDArray[np.floating[Any]],
+    direction: NDArray[np.floating[Any]],
+    length: float,
+) -> float:
+    """How far from ``start``, along the unit vector ``direction`` and at most ``length``, a
+    disc of ``radius`` keeps ``MARGIN`` clear of every obstacle on ``floor``, as the cells of a
+    :class:`WalkGrid` do: to the first place it would not, to a centimetre (0 when it does not
+    at ``start``)."""
+    origin = np.asarray(start, dtype=np.float64)
+    heading = np.asarray(direction, dtype=np.float64)
+
+    def blocked(distance: float) -> bool:
+        x, y = origin + distance * heading
+        return floor.disc_blocked_at(float(x), float(y), radius + MARGIN)
+
+    step = 0.5 * CELL
+    free = 0.0
+    while free < length:
+        ahead = min(free + step, length)
+        if blocked(ahead):
+            break
+        free = ahead
+    else:
+        return float(length)
+    if free == 0.0 and blocked(0.0):
+        return 0.0
+    ahead = min(free + step, length)
+    while ahead - free > 0.01:
+        middle = 0.5 * (free + ahead)
+        free, ahead = (free, middle) if blocked(middle) else (middle, ahead)
+    return free
