@@ -585,6 +585,32 @@ def test_episodes_the_sut_could_not_play_widen_the_probability_not_lower_it(tmp_
     assert untested["failure_and_tested"]["low"] < summary["probability"]["low"]
 
 
+def test_a_splitting_range_holds_every_encounter_the_sut_could_not_play(tmp_path):
+    # Failures are rare (2e-4) and the SUT errs in 16 % of encounters, each before its score
+    # rises (score 0): no such encounter reaches the levels the chains climb.
+    toy = SometimesCrashing(threshold=5.0, p_looks=0.0)
+    config = EstimateConfig(
+        episodes=2000, seed=0, estimator=EstimatorParams(method="splitting", batch_size=300)
+    )
+    table = EstimateRun(config, tmp_path / "split", source=toy).run()
+    summary = summarise(config, table, toy.threshold)
+    untested = summary["untested"]
+    # How often the SUT errs is the first level's share (plain Monte Carlo over the model).
+    first_level = table["sut_error"].to_numpy(bool)[:300]
+    erred = untested["probability"]
+    assert erred["probability"] == pytest.approx(first_level.mean())
+    assert (erred["low"], erred["high"]) == clopper_pearson(int(first_level.sum()), 300)
+    truth = float(stats.norm.sf(1.0))  # P(b > 1)
+    assert erred["low"] <= truth <= erred["high"]
+    # Counted as failures, they put the probability of a failure at that share at least.
+    either = untested["failure_or_untested"]
+    assert summary["probability"]["high"] < 0.01
+    assert either["low"] >= erred["low"] > 0.1
+    assert either["high"] >= truth + toy.probability
+    assert untested["failure_and_tested"]["high"] < 0.01
+    assert "from the first level" in untested["note"]
+
+
 class CrashingAtRandom(ClosedFormEncounters):
     """A SUT that raises in about half of the encounters, whatever the encounter is (when its
     noise seed is odd)."""

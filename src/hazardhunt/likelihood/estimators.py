@@ -302,6 +302,29 @@ def estimate(
     return Estimate(p, low, high, n, k, se, se / p, ess, normalised, "log-normal")
 
 
+def either_of(first: Estimate, second: Estimate, episodes: int, marked: int) -> Estimate:
+    """The probability of either of two events that never happen together (a failure, an
+    encounter the SUT could not play), from estimates of each over the same ``episodes``
+    (``marked`` of which are either): the sum of the two, and each end of the interval the sum
+    of theirs. Whatever the two estimates' correlation, the upper end is exceeded with at most
+    the sum of their upper tails' risks (5 % for two 95 % intervals), and so is the lower end;
+    the standard error is the sum of theirs, an upper bound."""
+    probability = first.probability + second.probability
+    error = first.standard_error + second.standard_error
+    return Estimate(
+        probability,
+        min(first.low + second.low, 1.0),
+        min(first.high + second.high, 1.0),
+        episodes,
+        marked,
+        error,
+        error / probability if probability else None,
+        math.nan,
+        probability,
+        f"sum of two: {first.interval}; {second.interval}",
+    )
+
+
 def log_normal_interval(probability: float, relative_error: float) -> tuple[float, float]:
     """The interval of coverage :data:`CONFIDENCE` of a log-normal with this mean and
     coefficient of variation: skewed upwards as an estimate of a small probability from few

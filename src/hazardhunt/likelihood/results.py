@@ -21,14 +21,19 @@ import pandas as pd
 from pydantic import TypeAdapter, ValidationError
 from typing_extensions import NotRequired, TypedDict  # which pydantic validates on Python 3.11
 
-from hazardhunt.likelihood.estimators import Estimate, episodes_for, estimate
+from hazardhunt.likelihood.estimators import Estimate, either_of, episodes_for, estimate
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     EstimateError,
     first_sut_error,
     nothing_tested,
 )
-from hazardhunt.likelihood.splitting import SplittingPlanner, level_records, splitting_estimate
+from hazardhunt.likelihood.splitting import (
+    SplittingPlanner,
+    level_records,
+    splitting_estimate,
+    untested_share,
+)
 from hazardhunt.textfiles import format_validation_error
 
 TARGET_RELATIVE_ERROR = 0.3
@@ -54,8 +59,9 @@ LEFT_OUT = {
     "the method has no correction for it: rely on the range above, or mend the SUT.",
     "splitting": "splitting takes each level's share over its tested samples: the probability "
     "of a failure among the encounters the SUT plays (per encounter if its errors have nothing "
-    "to do with the encounter); the upper end of the range above counts as failures only the "
-    "erred samples that reached the last level.",
+    "to do with the encounter). The levels after the first follow high scores, which an "
+    "encounter the SUT could not play may never reach, so the range above adds the probability "
+    "of such an encounter, from the first level (plain Monte Carlo), to that of a failure.",
 }
 """How each method leaves out the episodes that ended in a SUT error, and what that assumes."""
 CHAIN_ERRORS = (
@@ -124,10 +130,21 @@ def _untested(
     in_chains = sum(level["sut_errors"] for level in (levels or [])[1:])
     if in_chains:
         note += CHAIN_ERRORS.format(errors=in_chains)
+    failure_and_tested = _event(config, table, failed, threshold)
+    if config.estimator.method == "splitting":
+        # The levels follow high scores, which an encounter the SUT could not play may never
+        # reach: its probability is the first level's, added to the failures'.
+        planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+        untested = untested_share(planner, table)
+        marked = int((failed | errored).sum())
+        either = either_of(failure_and_tested, untested, len(table), marked)
+    else:
+        untested = _event(config, table, errored, threshold)
+        either = _event(config, table, failed | errored, threshold)
     return {
-        "probability": _event(config, table, errored, threshold).record(),
-        "failure_and_tested": _event(config, table, failed, threshold).record(),
-        "failure_or_untested": _event(config, table, failed | errored, threshold).record(),
+        "probability": untested.record(),
+        "failure_and_tested": failure_and_tested.record(),
+        "failure_or_untested": either.record(),
         "note": note,
     }
 

@@ -26,6 +26,7 @@ taken over its tested samples alone, so that the product is the probability of a
 among the encounters the SUT plays: ``P(score >= l_1 | tested) * P(score >= l_2 | score >= l_1,
 tested) * ...``. The correlation along the chains is still measured with such samples as
 misses; a level beyond the first that holds some says so (``sut_errors`` of its record).
+How likely such an encounter is comes from the first level alone (:func:`untested_share`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from hazardhunt.likelihood.estimators import (
     EstimatorParams,
     PlannedBatch,
     PlannerBase,
+    estimate,
     log_normal_interval,
 )
 
@@ -276,6 +278,24 @@ def splitting_estimate(
     if not state.converged:
         kind = "log-normal; not converged: the budget ran out before the failure level"
     return Estimate(p, low, high, episodes, failures, p * cv, cv, math.nan, p, kind), state
+
+
+def untested_share(planner: SplittingPlanner, table: pd.DataFrame) -> Estimate:
+    """The probability of an encounter the SUT could not play: the share of the first level's
+    samples that ended in a SUT error, with its exact interval. The first level is plain Monte
+    Carlo over the model; the levels after it are drawn towards high scores and say nothing of
+    how often the SUT errs (an error early in an episode leaves its score low, and such an
+    encounter never reaches them).
+
+    Raises:
+        ValueError: The first level is not complete.
+    """
+    state = planner.progress(table)
+    if not state.levels:
+        raise ValueError("the first level is not complete")
+    rows = state.levels[0].rows()
+    erred = table["sut_error"].to_numpy(bool)[rows]
+    return estimate(erred, np.zeros(len(rows)), np.ones(len(rows)))
 
 
 def _chain_correlation(marks: list[list[bool]], share: float) -> float:
