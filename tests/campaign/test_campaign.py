@@ -699,13 +699,11 @@ def test_the_table_shows_a_scenario_file_relative_to_where_the_user_is(
     assert shown_scenario("crossing") == "crossing"
 
 
-def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted(
-    campaign_file: Path, reference: Path, tmp_path: Path
-) -> None:
-    out = tmp_path / "campaign"
+def with_a_stranger(reference: Path, out: Path, run_id: str) -> None:
+    """A copy of the reference campaign in ``out`` whose folder ``run_id`` holds a run of
+    another configuration: crossing without a field, seed 3."""
     shutil.copytree(reference, out)
-    run_id = "head-on__2m__random__seed1"
-    stranger = tmp_path / "stranger"
+    stranger = out.parent / "stranger"
     made = hazardhunt(
         "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
         "--episodes", EPISODES, "--seed", 3, "--out", stranger,
@@ -713,6 +711,13 @@ def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted
     assert made.returncode == 0, made.stderr
     shutil.rmtree(out / "runs" / run_id)
     shutil.copytree(stranger, out / "runs" / run_id)
+
+
+def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted(
+    campaign_file: Path, reference: Path, tmp_path: Path
+) -> None:
+    out, run_id = tmp_path / "campaign", "head-on__2m__random__seed1"
+    with_a_stranger(reference, out, run_id)
     unfinished = "overtaking__2m__random__seed0"
     (out / "runs" / unfinished / "summary.json").unlink()
     result = hazardhunt("campaign", campaign_file, "--out", out)
@@ -724,6 +729,29 @@ def test_a_run_folder_of_another_configuration_is_named_and_redone_never_counted
     assert {(row["run_id"], row["scenario"]) for row in rows if row["run_id"] == run_id} == {
         (run_id, "head-on")
     }
+
+
+def test_report_export_and_copy_leave_out_a_run_folder_of_another_configuration(
+    campaign_file: Path, reference: Path, tmp_path: Path
+) -> None:
+    out, run_id = tmp_path / "campaign", "head-on__2m__random__seed1"
+    with_a_stranger(reference, out, run_id)
+    said = (
+        f"run {run_id} is damaged (it holds a run of another configuration (scenario: there "
+        "'crossing', here 'head-on'))"
+    )
+    report = hazardhunt("report", out)
+    assert report.returncode == 0, report.stderr
+    assert said in " ".join(report.stderr.split())
+    runs = pd.read_csv(out / "report" / "tables" / "runs.csv")
+    assert set(runs["run_id"]) == {p.name for p in (reference / "runs").iterdir()} - {run_id}
+    assert "crossing" not in set(runs["scenario"])
+    cases = hazardhunt("export", out, "--out", tmp_path / "cases")
+    assert cases.returncode == 0, cases.stderr
+    assert said in " ".join(cases.stderr.split())
+    copied = hazardhunt("copy", out, "--out", tmp_path / "copy")
+    assert copied.returncode == 0, copied.stderr
+    assert not (tmp_path / "copy" / "runs" / run_id).exists()
 
 
 def test_a_campaign_json_that_does_not_read_is_one_line_for_report_and_export(

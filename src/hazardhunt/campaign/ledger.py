@@ -111,7 +111,9 @@ class RunStates:
 def campaign_run_states(out: Path, config: CampaignConfig) -> RunStates:
     """The runs of the campaign ``config`` in ``out`` (read with :data:`RECORDED`: what ran,
     its scenario files not needed): a run that has not finished failed if the ledger records it
-    as failed, else it has not run yet (or is running)."""
+    as failed, else it has not run yet (or is running); a finished one whose files do not match
+    their checksums, or that holds a run of another configuration than the campaign's, is
+    damaged (the campaign runs it again)."""
     entries, problem = read_ledger(out)
     errors = ledger_errors(entries)
     states = RunStates([], [], {}, {}, problem)
@@ -122,7 +124,7 @@ def campaign_run_states(out: Path, config: CampaignConfig) -> RunStates:
                 states.failed[run.run_id] = errors[run.run_id]
             else:
                 states.unfinished.append(run.run_id)
-        elif (damage := find_damage(path)) is not None:
+        elif (damage := find_damage(path) or other_configuration(path, run)) is not None:
             states.damaged[run.run_id] = damage
         else:
             states.complete.append(path)
@@ -211,15 +213,22 @@ class Ledger:
 def _not_this_run(directory: Path, run: RunConfig) -> str | None:
     """Why the finished run in ``directory`` is not ``run`` (another configuration, or played on
     its scenario file before the file changed), if it is not."""
+    if (why := other_configuration(directory, run)) is not None:
+        return f"is damaged ({why})"
+    if (why := played_before_change(run.scenario, directory)) is not None:
+        return f"was {why}"
+    return None
+
+
+def other_configuration(directory: Path, run: RunConfig) -> str | None:
+    """Why the finished run in ``directory`` does not hold ``run``'s configuration, if it does
+    not: its ``config.json`` does not read, or says other settings (the first that differs)."""
     try:
         stored = load_run_config(directory)
     except ReplayError:
-        return "is damaged (its config.json does not read as a run's configuration)"
+        return "its config.json does not read as a run's configuration"
     if stored != run:
-        difference = first_difference(stored, run)
-        return f"is damaged (it holds a run of another configuration ({difference}))"
-    if (why := played_before_change(run.scenario, directory)) is not None:
-        return f"was {why}"
+        return f"it holds a run of another configuration ({first_difference(stored, run)})"
     return None
 
 
