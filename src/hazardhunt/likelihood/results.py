@@ -134,8 +134,7 @@ def _untested(
     if config.estimator.method == "splitting":
         # The levels follow high scores, which an encounter the SUT could not play may never
         # reach: its probability is the first level's, added to the failures'.
-        planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
-        untested = untested_share(planner, table)
+        untested = untested_share(_splitting_planner(config, threshold), table)
         marked = int((failed | errored).sum())
         either = either_of(failure_and_tested, untested, len(table), marked)
     else:
@@ -153,12 +152,18 @@ def _levels(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> An
     """Multilevel splitting's levels, to see how its chains went (None for the others)."""
     if config.estimator.method != "splitting":
         return None
-    planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+    planner = _splitting_planner(config, threshold)
     try:
         records, _ = level_records(planner, table, table["failure"].to_numpy(bool))
     except ValueError as error:
         raise EstimateError(f"splitting: {error}: no probability can be given") from None
     return [asdict(record) for record in records]
+
+
+def _splitting_planner(config: EstimateConfig, threshold: float) -> SplittingPlanner:
+    """The planner that recomputes a splitting estimate's levels from its stored scores (it
+    needs no model: it plans no batch here)."""
+    return SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
 
 
 def _stuck(levels: list[dict[str, Any]] | None, table: pd.DataFrame) -> str | None:
@@ -215,7 +220,7 @@ def _event(
     """The probability of the episodes ``event`` marks, by the estimate's own method, over
     every episode it counts (those that ended in a SUT error too)."""
     if config.estimator.method == "splitting":
-        planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+        planner = _splitting_planner(config, threshold)
         return splitting_estimate(planner, table, event, tested_only=False)[0]
     counted = ~table["adapting"].to_numpy(bool)
     try:
@@ -232,7 +237,7 @@ def _splitting(
     config: EstimateConfig, table: pd.DataFrame, classes_found: list[str], threshold: float
 ) -> tuple[Estimate, dict[str, Any], list[dict[str, float]], int]:
     """Multilevel splitting: the product of the levels' shares (over their tested samples)."""
-    planner = SplittingPlanner(config.estimator, (), threshold, config.episodes, config.seed)
+    planner = _splitting_planner(config, threshold)
     failed = table["failure"].to_numpy(bool)
     try:
         overall, progress = splitting_estimate(planner, table, failed)
