@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,6 +16,9 @@ from hazardhunt.world.geometry import (
     polygon_edges,
 )
 from hazardhunt.world.navigation import WalkGrid
+
+if TYPE_CHECKING:
+    from hazardhunt.world.rosmap import OccupancyGrid
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,9 @@ class FloorMap:
     obstacles: tuple[Obstacle, ...]
     blind_zones: tuple[FloatArray, ...] = ()
     """Polygons (K, 2) where the tracking cameras do not see the human."""
+    occupancy: OccupancyGrid | None = field(default=None, repr=False, compare=False)
+    """The site map the floor was read from (its obstacles are the map's blocked cells), or
+    None for a floor of polygons."""
     edges: FloatArray = field(init=False, repr=False, compare=False)
     """All obstacle edges, shape (E, 2, 2), for fast clearance queries."""
     edge_owner: NDArray[np.intp] = field(init=False, repr=False, compare=False)

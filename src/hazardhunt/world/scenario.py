@@ -1,8 +1,9 @@
 """Scenarios as data: a floor map file and a scenario file (TOML), validated on load.
 
-A scenario names its map (a path relative to the scenario file, or an inline ``[map]`` table),
-the robot's start pose, waypoints and goal, and the human's start pose. Every error names the
-file, the field and what is wrong.
+A scenario names its map (a path relative to the scenario file: a TOML file of polygons or a
+ROS map_server YAML file, :mod:`hazardhunt.world.rosmap`; or an inline ``[map]`` table), the
+robot's start pose, waypoints and goal, and the human's start pose. Every error names the file,
+the field and what is wrong.
 """
 
 from __future__ import annotations
@@ -17,7 +18,16 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
@@ -26,6 +36,15 @@ from hazardhunt.textfiles import format_validation_error, loads_toml
 from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
+from hazardhunt.world.rosmap import (
+    MAP_SUFFIXES,
+    MapFileError,
+    OccupancyGrid,
+    decode_cells,
+    encode_cells,
+    grid_floor,
+    load_ros_map,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -131,12 +150,51 @@ class _BlindZoneSpec(_Strict):
     _polygon_ok = field_validator("polygon")(_check_polygon)
 
 
+class _OccupancySpec(_Strict):
+    """A site map's grid inlined (what a run records of a scenario on a ROS map)."""
+
+    resolution: Number = Field(gt=0)
+    origin: tuple[Number, Number, Number]
+    columns: Annotated[int, Strict(), Field(ge=1)]
+    rows: Annotated[int, Strict(), Field(ge=1)]
+    cells: str
+
+    @field_validator("cells")
+    @classmethod
+    def _cells_fit(cls, value: str, info: ValidationInfo) -> str:
+        columns, rows = info.data.get("columns"), info.data.get("rows")
+        if columns is not None and rows is not None:
+            decode_cells(value, columns, rows)
+        return value
+
+    @property
+    def grid(self) -> OccupancyGrid:
+        """The grid the table holds."""
+        cells = decode_cells(self.cells, self.columns, self.rows)
+        return OccupancyGrid(self.resolution, self.origin, cells)
+
+
 class _MapSpec(_Strict):
     name: str
     width: Number = Field(gt=0)
     height: Number = Field(gt=0)
     obstacles: list[_ObstacleSpec] = []
     blind_zones: list[_BlindZoneSpec] = []
+    occupancy: _OccupancySpec | None = None
+
+    @model_validator(mode="after")
+    def _grid_alone(self) -> _MapSpec:
+        if self.occupancy is None:
+            return self
+        grid = self.occupancy.grid
+        if self.obstacles:
+            raise ValueError("obstacles: must be empty beside an occupancy grid (its cells are)")
+        if (self.width, self.height) != (grid.width, grid.height):
+            raise ValueError(
+                f"width, height: must be the grid's {grid.width:g} m x {grid.height:g} m, "
+                f"not {self.width:g} m x {self.height:g} m"
+            )
+        return self
 
 
 class _RobotSpec(_Strict):
@@ -152,7 +210,9 @@ class _HumanSpec(_Strict):
 class _ScenarioSpec(_Strict):
     name: str
     description: str = ""
-    map: str | _MapSpec
+    map: str | dict[str, Any]
+    """A map file's name, or the map's table (validated by :func:`_map_table`, so that an
+    error names its key as ``map.KEY``)."""
     robot: _RobotSpec
     human: _HumanSpec
     fields: dict[str, dict[str, Any]] = {}
@@ -183,9 +243,12 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         map_path = (path.parent / spec.map).resolve()
         if not map_path.exists():
             raise ScenarioError(f"{path}: map: no such map file {spec.map!r}")
-        floor = _build_floor(_parse(map_path, _MapSpec))
+        if map_path.suffix.lower() in MAP_SUFFIXES:
+            floor = grid_floor(map_path.stem, _ros_map(map_path))
+        else:
+            floor = _build_floor(_parse(map_path, _MapSpec))
     else:
-        floor = _build_floor(spec.map)
+        floor = _build_floor(_map_table(spec.map, path))
     return _build_scenario(spec, floor, path)
 
 
@@ -202,7 +265,14 @@ def scenario_from_data(data: dict[str, Any], source: str) -> Scenario:
         raise ScenarioError(f"{source}: {format_validation_error(error, _ScenarioSpec)}") from error
     if isinstance(spec.map, str):
         raise ScenarioError(f"{source}: map: must be an inline table here, not a file name")
-    return _build_scenario(spec, _build_floor(spec.map), Path(source))
+    return _build_scenario(spec, _build_floor(_map_table(spec.map, source)), Path(source))
+
+
+def _map_table(table: dict[str, Any], source: str | Path) -> _MapSpec:
+    try:
+        return _MapSpec.model_validate(table)
+    except ValidationError as error:
+        raise ScenarioError(f"{source}: map.{format_validation_error(error, _MapSpec)}") from None
 
 
 def _build_scenario(spec: _ScenarioSpec, floor: FloorMap, path: Path) -> Scenario:
@@ -236,6 +306,13 @@ def _parse(path: Path, model: type[_Strict]) -> Any:
         raise ScenarioError(f"{path}: {format_validation_error(error, model)}") from error
 
 
+def _ros_map(path: Path) -> OccupancyGrid:
+    try:
+        return load_ros_map(path)
+    except MapFileError as error:
+        raise ScenarioError(str(error)) from None
+
+
 def _pose(spec: _PoseSpec) -> Pose:
     return Pose(spec.x, spec.y, math.radians(spec.heading_deg))
 
@@ -245,6 +322,9 @@ def _build_floor(spec: _MapSpec) -> FloorMap:
         vertices = np.asarray(polygon, dtype=np.float64)
         return vertices if Polygon(polygon).exterior.is_ccw else vertices[::-1].copy()
 
+    blind_zones = tuple(counter_clockwise(zone.polygon) for zone in spec.blind_zones)
+    if spec.occupancy is not None:
+        return grid_floor(spec.name, spec.occupancy.grid, blind_zones)
     return FloorMap(
         name=spec.name,
         width=spec.width,
@@ -252,7 +332,7 @@ def _build_floor(spec: _MapSpec) -> FloorMap:
         obstacles=tuple(
             Obstacle(o.name, counter_clockwise(o.polygon), o.kind) for o in spec.obstacles
         ),
-        blind_zones=tuple(counter_clockwise(zone.polygon) for zone in spec.blind_zones),
+        blind_zones=blind_zones,
     )
 
 
@@ -292,7 +372,8 @@ def _check_human_body(floor: FloorMap, point: FloatArray, path: Path) -> None:
 
 def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
     """The contents of a built-in scenario or a scenario file, with a map file it names
-    inlined as the ``map`` table: everything needed to rebuild it elsewhere.
+    inlined as the ``map`` table: everything needed to rebuild it elsewhere (a ROS map as its
+    grid of cells, which holds what its image and thresholds say).
 
     Raises:
         ScenarioError: The scenario does not load.
@@ -301,5 +382,25 @@ def scenario_data(name_or_path: str | Path) -> dict[str, Any]:
     path = Path(scenario.source)
     data: dict[str, Any] = loads_toml(path.read_text(encoding="utf-8"))
     if isinstance(data.get("map"), str):
-        data["map"] = loads_toml((path.parent / data["map"]).read_text(encoding="utf-8"))
+        map_path = path.parent / data["map"]
+        grid = scenario.floor.occupancy
+        if grid is not None and map_path.suffix.lower() in MAP_SUFFIXES:
+            data["map"] = _grid_data(scenario.floor.name, grid)
+        else:
+            data["map"] = loads_toml(map_path.read_text(encoding="utf-8"))
     return data
+
+
+def _grid_data(name: str, grid: OccupancyGrid) -> dict[str, Any]:
+    return {
+        "name": name,
+        "width": grid.width,
+        "height": grid.height,
+        "occupancy": {
+            "resolution": grid.resolution,
+            "origin": list(grid.origin),
+            "columns": grid.columns,
+            "rows": grid.rows,
+            "cells": encode_cells(grid.cells),
+        },
+    }
