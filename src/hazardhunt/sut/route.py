@@ -121,10 +121,16 @@ thousands of vertices, a traced wall) then costs no more than a coarse one."""
 def inflated_obstacles(floor: FloorMap, inflation: float) -> list[Polygon]:
     """The floor's obstacles grown by ``inflation`` m, with square corners; an outline with
     detail finer than :data:`ROUTE_TOLERANCE` is simplified first and grown by that much more,
-    so that it still holds everything within ``inflation`` of the obstacle."""
+    so that it still holds everything within ``inflation`` of the obstacle.
+
+    A floor read from a site map has its blocked cells merged into one outline per connected
+    group first: the corners where two rectangles of cells meet are no corners to plan around."""
+    outlines = [Polygon(obstacle.polygon) for obstacle in floor.obstacles]
+    if floor.occupancy is not None and outlines:
+        merged = shapely.union_all(outlines)
+        outlines = list(getattr(merged, "geoms", [merged]))
     blocked = []
-    for obstacle in floor.obstacles:
-        outline = Polygon(obstacle.polygon)
+    for outline in outlines:
         simplified = outline.simplify(ROUTE_TOLERANCE)
         if simplified.equals(outline):
             blocked.append(outline.buffer(inflation, join_style="mitre"))
@@ -183,14 +189,17 @@ def plan_route(
 
 def _convex_corners(polygon: Polygon) -> list[FloatArray]:
     """The vertices of ``polygon``'s outline where it turns outwards: the only places a
-    shortest path around it bends."""
-    ring = np.asarray(polygon.exterior.coords)[:-1]
-    incoming = ring - np.roll(ring, 1, axis=0)
-    outgoing = np.roll(ring, -1, axis=0) - ring
-    turn = incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0]
-    if not polygon.exterior.is_ccw:
-        turn = -turn
-    return list(ring[turn > 0])
+    shortest path around it bends (on a hole's outline, where the polygon reaches into it)."""
+    corners = []
+    for ring, outwards in [(polygon.exterior, 1.0), *((hole, -1.0) for hole in polygon.interiors)]:
+        points = np.asarray(ring.coords)[:-1]
+        incoming = points - np.roll(points, 1, axis=0)
+        outgoing = np.roll(points, -1, axis=0) - points
+        turn = incoming[:, 0] * outgoing[:, 1] - incoming[:, 1] * outgoing[:, 0]
+        if not ring.is_ccw:
+            turn = -turn
+        corners.extend(points[outwards * turn > 0])
+    return corners
 
 
 def _shortest_leg(
