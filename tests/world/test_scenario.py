@@ -191,3 +191,19 @@ def test_a_human_whose_body_reaches_off_the_floor_is_refused(tmp_path):
     with pytest.raises(ScenarioError) as caught:
         load_scenario(path)
     assert f"{path}: human.start: (0.1, 5) lies too near the edge of the floor" in str(caught.value)
+
+
+def test_an_inline_map_table_names_its_key(tmp_path):
+    # The inline table of a scenario file, as a regression case holds it: the key at fault is
+    # map.KEY (it was "map.str: must be text, not a table").
+    from hazardhunt.world.scenario import scenario_data, scenario_from_data
+
+    data = scenario_data("crossing")
+    del data["map"]["width"]
+    with pytest.raises(ScenarioError, match=r"^case\.toml: map\.width: missing$"):
+        scenario_from_data(data, "case.toml")
+    inline = VALID.replace(f'map = "{SHOPFLOOR}"', "").replace(
+        "[robot]", '[map]\nname = "m"\nwidth = 20.0\nheigth = 20.0\n[robot]'
+    )
+    with pytest.raises(ScenarioError, match=r"map\.heigth: unknown key \(did you mean height\?\)"):
+        load_scenario(write(tmp_path, inline))

@@ -55,6 +55,8 @@ class FloorMap:
         init=False, repr=False, compare=False
     )
     """Per obstacle (x min, y min, x max, y max), in m."""
+    _box_array: FloatArray = field(init=False, repr=False, compare=False)
+    """``bounding_boxes`` as an array, shape (N, 4)."""
     _segments: tuple[tuple[tuple[int, float, float, float, float, float, float], ...], ...] = field(
         init=False, repr=False, compare=False
     )
@@ -79,6 +81,7 @@ class FloorMap:
             for p in polygons
         )
         object.__setattr__(self, "bounding_boxes", boxes)
+        object.__setattr__(self, "_box_array", np.array(boxes, dtype=np.float64).reshape(-1, 4))
         start = self.edges[:, 0, :]
         direction = self.edges[:, 1, :] - start
         length_sq = np.einsum("ij,ij->i", direction, direction)
@@ -175,12 +178,7 @@ class FloorMap:
         if len(self.edges) == 0:
             raise ValueError("the floor has no obstacles")
         x, y = float(point[0]), float(point[1])
-        by_box = []
-        for index, (x_min, y_min, x_max, y_max) in enumerate(self.bounding_boxes):
-            dx = x_min - x if x < x_min else x - x_max if x > x_max else 0.0
-            dy = y_min - y if y < y_min else y - y_max if y > y_max else 0.0
-            by_box.append((dx * dx + dy * dy, index))
-        by_box.sort()
+        by_box = self._boxes_nearest_first(x, y)
         # Distances are compared with a margin far above their rounding error (in m, relative
         # to the coordinates); the edges within it of the nearest are compared exactly below.
         margin = 1e-9 * (1.0 + abs(x) + abs(y))
@@ -205,6 +203,28 @@ class FloorMap:
             gaps = np.array([(c[1] - x, c[2] - y) for c in nearest])
             nearest = [nearest[int(np.argmin(np.hypot(gaps[:, 0], gaps[:, 1])))]]
         return np.array(nearest[0][1:3])
+
+    def _boxes_nearest_first(self, x: float, y: float) -> list[tuple[float, int]]:
+        """The squared distance from (x, y) to each obstacle's bounding box, with the
+        obstacle's index, nearest first and ties in the floor's order."""
+        if len(self.bounding_boxes) <= _FEW_OBSTACLES:
+            by_box = []
+            for index, (x_min, y_min, x_max, y_max) in enumerate(self.bounding_boxes):
+                dx = x_min - x if x < x_min else x - x_max if x > x_max else 0.0
+                dy = y_min - y if y < y_min else y - y_max if y > y_max else 0.0
+                by_box.append((dx * dx + dy * dy, index))
+            by_box.sort()
+            return by_box
+        boxes = self._box_array
+        dx_array = np.where(
+            x < boxes[:, 0], boxes[:, 0] - x, np.where(x > boxes[:, 2], x - boxes[:, 2], 0.0)
+        )
+        dy_array = np.where(
+            y < boxes[:, 1], boxes[:, 1] - y, np.where(y > boxes[:, 3], y - boxes[:, 3], 0.0)
+        )
+        distances_sq = dx_array * dx_array + dy_array * dy_array
+        order = np.argsort(distances_sq, kind="stable")
+        return list(zip(distances_sq[order].tolist(), order.tolist(), strict=True))
 
     def disc_blocked(self, center: FloatArray, radius: float) -> bool:
         """Whether a disc overlaps an obstacle or leaves the floor."""
@@ -250,6 +270,11 @@ class FloorMap:
     def in_blind_zone(self, point: FloatArray) -> bool:
         """Whether the cameras cannot see a point."""
         return any(point_in_polygon(point, zone) for zone in self.blind_zones)
+
+
+_FEW_OBSTACLES = 64
+"""Up to this many obstacles, a scalar query loops over them on Python floats; beyond (a floor
+read from a site map), numpy's arrays are faster."""
 
 
 class _ObstacleCells:
