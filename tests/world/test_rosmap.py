@@ -1,7 +1,9 @@
 """Site maps as ROS map_server writes them: the map's cells as a scenario's floor."""
 
 import json
+import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ from PIL import Image
 from hazardhunt.benchmark.conservative import ConservativeController
 from hazardhunt.campaign.scenario_record import SCENARIO_FILE, played_before_change
 from hazardhunt.sim.simulation import Simulation
-from hazardhunt.sut.route import scenario_route
+from hazardhunt.sut.route import inflated_obstacles, scenario_route
 from hazardhunt.world.kinematics import move_human
 from hazardhunt.world.rosmap import (
     FREE,
@@ -334,3 +336,33 @@ def test_a_run_on_a_bad_map_exits_2_before_writing_anything(tmp_path):
     assert result.returncode == 2
     assert f"{tmp_path / 'site.yaml'}: resolution: must be greater than 0" in result.stderr
     assert not out.exists()
+
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "site_map"
+
+
+def test_the_warehouse_example_plans_round_one_outline_per_group_of_cells():
+    from scipy.ndimage import label
+
+    scenario = load_scenario(EXAMPLE / "warehouse_crossing.toml")
+    floor = scenario.floor
+    assert floor.occupancy is not None
+    assert floor.occupancy.origin == (-4.5, -2.25, 0.0)
+    _, groups = label(floor.occupancy.blocked())  # cells that share a side
+    # Hundreds of rectangles of cells, a few dozen connected groups to plan round.
+    assert len(floor.obstacles) > 10 * groups
+    assert len(inflated_obstacles(floor, 0.5)) <= groups
+    route = scenario_route(scenario, 0.5)
+    assert route.points[-1].tolist() == [28.0, 10.0]
+
+
+def test_the_nearest_obstacle_point_on_a_map_of_many_rectangles_is_the_nearest():
+    # The human slides along what it touches: the point it is pushed away from must be the
+    # nearest of all the map's rectangles (the search takes the nearest boxes first).
+    floor = load_scenario(EXAMPLE / "warehouse_crossing.toml").floor
+    points = np.random.default_rng(5).uniform((0.0, 0.0), (floor.width, floor.height), (300, 2))
+    for point in np.vstack([points, np.round(points * 4) / 4]):
+        nearest = floor.nearest_obstacle_point(point)
+        assert math.hypot(*(nearest - point)) == pytest.approx(
+            floor.boundary_distance(point), abs=1e-12
+        )
