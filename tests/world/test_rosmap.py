@@ -366,3 +366,26 @@ def test_the_nearest_obstacle_point_on_a_map_of_many_rectangles_is_the_nearest()
         assert math.hypot(*(nearest - point)) == pytest.approx(
             floor.boundary_distance(point), abs=1e-12
         )
+
+
+@pytest.mark.slow
+def test_a_campaign_resumed_after_the_map_image_changed_plays_its_run_again(tmp_path):
+    room(tmp_path)
+    file, out = tmp_path / "campaign.toml", tmp_path / "campaign"
+    file.write_text(
+        'scenarios = ["room.toml"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [0]\n'
+        "episodes = 2\n"
+    )
+    assert hazardhunt("campaign", file, "--out", out).returncode == 0
+    assert "before the file changed" not in hazardhunt("campaign", file, "--out", out).stdout
+    shades = np.asarray(Image.open(tmp_path / "site.pgm")).copy()
+    shades[2, 2] = 0  # a crate in the north-west corner
+    Image.fromarray(shades).save(tmp_path / "site.pgm")
+    result = hazardhunt("campaign", file, "--out", out)
+    assert result.returncode == 0, result.stderr
+    assert (
+        f"run room__none__random__seed0 was played on {tmp_path / 'room.toml'} before the file "
+        "changed; running it again" in " ".join(result.stdout.split())
+    )
+    recorded = json.loads((out / "runs" / "room__none__random__seed0" / SCENARIO_FILE).read_text())
+    assert recorded == json.loads(json.dumps(scenario_data(tmp_path / "room.toml")))
