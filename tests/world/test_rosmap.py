@@ -389,3 +389,18 @@ def test_a_campaign_resumed_after_the_map_image_changed_plays_its_run_again(tmp_
     )
     recorded = json.loads((out / "runs" / "room__none__random__seed0" / SCENARIO_FILE).read_text())
     assert recorded == json.loads(json.dumps(scenario_data(tmp_path / "room.toml")))
+
+
+def test_a_point_off_a_map_with_an_origin_says_where_positions_are_measured_from(tmp_path):
+    scenario = (EXAMPLE / "warehouse_crossing.toml").read_text()
+    (tmp_path / "warehouse.yaml").write_text((EXAMPLE / "warehouse.yaml").read_text())
+    (tmp_path / "warehouse.png").write_bytes((EXAMPLE / "warehouse.png").read_bytes())
+    # The goal as the map's own frame has it: 4.5 m west and 2.25 m south of the floor's.
+    moved = tmp_path / "moved.toml"
+    moved.write_text(scenario.replace("x = 28.0, y = 10.0", "x = 23.5, y = -2.25"))
+    with pytest.raises(ScenarioError) as error:
+        load_scenario(moved)
+    assert str(error.value) == (
+        f"{moved}: robot.goal: (23.5, -2.25) lies off the 30 m x 20 m floor (positions are "
+        "measured from the map's lower-left corner, at (-4.5, -2.25) in the map's frame)"
+    )

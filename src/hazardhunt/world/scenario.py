@@ -348,13 +348,26 @@ def _check_placement(scenario: Scenario, path: Path) -> None:
         if not floor.on_floor(point):
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies off the "
-                f"{floor.width:g} m x {floor.height:g} m floor"
+                f"{floor.width:g} m x {floor.height:g} m floor{_frame_hint(floor)}"
             )
         if floor.inside_obstacle(point):
             raise ScenarioError(
                 f"{path}: {field}: ({point[0]:g}, {point[1]:g}) lies inside an obstacle"
+                f"{_frame_hint(floor)}"
             )
     _check_human_body(floor, scenario.human_start.position, path)
+
+
+def _frame_hint(floor: FloorMap) -> str:
+    # A position copied from the map's own frame (RViz) lies elsewhere on the floor.
+    grid = floor.occupancy
+    if grid is None or grid.origin[:2] == (0.0, 0.0):
+        return ""
+    x, y, _ = grid.origin
+    return (
+        f" (positions are measured from the map's lower-left corner, at ({x:g}, {y:g}) in "
+        "the map's frame)"
+    )
 
 
 def _check_human_body(floor: FloorMap, point: FloatArray, path: Path) -> None:
