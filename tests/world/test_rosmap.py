@@ -404,3 +404,20 @@ def test_a_point_off_a_map_with_an_origin_says_where_positions_are_measured_from
         f"{moved}: robot.goal: (23.5, -2.25) lies off the 30 m x 20 m floor (positions are "
         "measured from the map's lower-left corner, at (-4.5, -2.25) in the map's frame)"
     )
+
+
+def test_any_floor_rasterises_to_the_cells_whose_centres_lie_in_an_obstacle():
+    from hazardhunt.world.floor import FloorMap, Obstacle
+    from hazardhunt.world.geometry import point_in_polygon
+
+    triangle = np.array([[1.0, 1.0], [4.2, 1.3], [2.1, 3.7]])
+    floor = FloorMap("triangle", 5.0, 4.0, (Obstacle("slab", triangle),))
+    grid = rasterise(floor, 0.25)
+    assert grid.cells.shape == (16, 20)
+    for row in range(16):
+        for column in range(20):
+            centre = np.array([(column + 0.5) * 0.25, (row + 0.5) * 0.25])
+            inside = point_in_polygon(centre, triangle)
+            assert grid.cells[row, column] == (OCCUPIED if inside else FREE)
+    with pytest.raises(ValueError, match=r"no whole number of 0\.3 m cells"):
+        rasterise(floor, 0.3)

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
+import shapely
 import yaml
 from numpy.typing import NDArray
 from PIL import Image, UnidentifiedImageError
@@ -44,11 +45,12 @@ from pydantic import (
     ValidationInfo,
     field_validator,
 )
+from shapely.geometry import Polygon
 
 from hazardhunt.errors import InputError
 from hazardhunt.textfiles import format_validation_error
 from hazardhunt.world.floor import FloorMap, Obstacle
-from hazardhunt.world.geometry import FloatArray, point_in_polygon
+from hazardhunt.world.geometry import FloatArray
 
 OCCUPIED = 100
 """A cell's value where the map is occupied (``nav_msgs/OccupancyGrid``)."""
@@ -314,11 +316,10 @@ def rasterise(floor: FloorMap, resolution: float) -> OccupancyGrid:
         x_max, y_max = obstacle.polygon.max(axis=0)
         near_columns = np.flatnonzero((centre_x > x_min) & (centre_x < x_max))
         near_rows = np.flatnonzero((centre_y > y_min) & (centre_y < y_max))
-        for row in near_rows.tolist():
-            for column in near_columns.tolist():
-                point = np.array([centre_x[column], centre_y[row]])
-                if point_in_polygon(point, obstacle.polygon):
-                    cells[row, column] = OCCUPIED
+        xs, ys = np.meshgrid(centre_x[near_columns], centre_y[near_rows])
+        inside = shapely.contains_xy(Polygon(obstacle.polygon), xs, ys)
+        block = np.ix_(near_rows, near_columns)
+        cells[block] = np.where(inside, OCCUPIED, cells[block])
     return OccupancyGrid(resolution, (0.0, 0.0, 0.0), cells)
 
 
