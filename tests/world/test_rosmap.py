@@ -19,6 +19,7 @@ from hazardhunt.world.rosmap import (
     OCCUPIED,
     UNKNOWN,
     cell_rectangles,
+    grid_floor,
     load_ros_map,
     rasterise,
 )
@@ -421,3 +422,16 @@ def test_any_floor_rasterises_to_the_cells_whose_centres_lie_in_an_obstacle():
             assert grid.cells[row, column] == (OCCUPIED if inside else FREE)
     with pytest.raises(ValueError, match=r"no whole number of 0\.3 m cells"):
         rasterise(floor, 0.3)
+
+
+def test_a_turned_map_frame_is_kept_and_leaves_the_floor_along_the_image(tmp_path):
+    path = write_map(tmp_path, [[0, 254], [254, 254]])
+    straight = grid_floor("site", load_ros_map(path))
+    path.write_text(path.read_text().replace("[-1.0, -2.0, 0.0]", "[-1.0, -2.0, 0.5]"))
+    turned = load_ros_map(path)
+    assert turned.origin == (-1.0, -2.0, 0.5)
+    # The image's top-left cell is the floor's north-west corner either way.
+    assert [o.polygon.tolist() for o in grid_floor("site", turned).obstacles] == [
+        o.polygon.tolist() for o in straight.obstacles
+    ]
+    assert straight.inside_obstacle(np.array([0.25, 0.75]))
