@@ -1,8 +1,12 @@
 """What an estimate records and refuses: the models its batches were played on (a changed
 people, uncertainties or plug-in file is not mixed in), no symbolic link in its directory, no
-likelihood that is not a number."""
+likelihood that is not a number; and the report of a received estimate, which names a damaged
+draw, a changed model or an unreadable summary in one line, and says so when a most likely
+failure no longer fails."""
 
 import json
+import shutil
+import warnings
 from importlib.resources import files
 from pathlib import Path
 
@@ -10,11 +14,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hazardhunt.analysis.risk_report import write_estimate_report
+from hazardhunt.campaign.config import EnvOptions
 from hazardhunt.errors import InputError
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.estimators import EstimatorParams
 from hazardhunt.likelihood.people import ModelError, WalkerModel
-from hazardhunt.likelihood.results import summarise
+from hazardhunt.likelihood.results import summarise, write_summary
 from hazardhunt.likelihood.run import EstimateConfig, EstimateRun
 from hazardhunt.likelihood.toy import ClosedFormEncounters
 from tests.helpers import hazardhunt
@@ -152,6 +158,11 @@ def test_an_estimate_holding_a_symbolic_link_is_refused_and_nothing_is_written_t
         )
     assert sorted(p.name for p in elsewhere.iterdir()) == before
     assert json.loads((received / "config.json").read_text())["episodes"] == 300
+    # The report reads nothing through it either.
+    shown = hazardhunt("report", received, cwd=ROOT)
+    assert shown.returncode == 2, shown.stderr
+    assert shown.stderr.strip() == f"error: {error.value}"
+    assert not (received / "report").exists()
 
 
 class NotANumberWhenFast(Dimension):
@@ -193,3 +204,55 @@ def test_a_stored_likelihood_that_is_not_a_number_gives_no_estimate(tmp_path):
     table.loc[7, "log_p"] = np.nan  # as a batch played before such draws were refused holds
     with pytest.raises(ModelError, match=r"log_prob is nan on the draw of episode 7: no estimate"):
         summarise(config, table, 4.0)
+
+
+@pytest.fixture(scope="module")
+def received(tmp_path_factory):
+    """A finished estimate of the built-in SUT with a people file of its own, with failures
+    to replay: 100 episodes of at most 14 s."""
+    here = tmp_path_factory.mktemp("received")
+    config = EstimateConfig(
+        scenario="head-on",
+        field="none",
+        people=str(built_in_people(here / "people.toml")),
+        env=EnvOptions(decision_period=0.2, episode_duration=14.0),
+        episodes=100,
+        estimator=EstimatorParams(method="mc", batch_size=50),
+    )
+    run = EstimateRun(config, here / "estimate")
+    table = run.run()
+    write_summary(here / "estimate", summarise(config, table, run.source.threshold))
+    return here
+
+
+def copy_of(received, tmp_path):
+    shutil.copytree(received, tmp_path, dirs_exist_ok=True)
+    estimate = tmp_path / "estimate"
+    config = json.loads((estimate / "config.json").read_text())
+    config["people"] = str(tmp_path / "people.toml")  # as it names it here
+    (estimate / "config.json").write_text(json.dumps(config))
+    return estimate
+
+
+@pytest.mark.slow
+def test_a_most_likely_failure_that_no_longer_fails_is_shown_as_such(received, tmp_path):
+    estimate = copy_of(received, tmp_path)
+    # The SUT changed since: a protective field now stops the robot before the human.
+    config = json.loads((estimate / "config.json").read_text())
+    (estimate / "config.json").write_text(json.dumps(config | {"field": "1.25m"}))
+    summary = json.loads((estimate / "estimate.json").read_text())
+    likeliest = summary["most_likely"]["all"]  # one failure to draw, for a short test
+    summary["most_likely"] = {"all": likeliest}
+    (estimate / "estimate.json").write_text(json.dumps(summary))
+    with warnings.catch_warnings(record=True) as warned:
+        warnings.simplefilter("always")
+        page = write_estimate_report(estimate).read_text()
+    said = (
+        f"Episode {likeliest['episode']} failed when the estimate played it; replayed from its "
+        "draw, it ended in a safe contact: the SUT or the model has changed since"
+    )
+    assert said in page
+    assert (
+        f"all: episode {likeliest['episode']} (replayed: ended in a safe contact, no longer" in page
+    )
+    assert any(said in str(warning.message) for warning in warned)
