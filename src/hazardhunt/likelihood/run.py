@@ -225,8 +225,6 @@ class EstimateRun:
                 nothing is written.
         """
         check_budget(config)
-        config = config.model_copy(update={"digests": models_of(config).digests()})
-        self.config = config
         self.directory = directory
         # Built here from ``config``, the encounters can be built again in worker processes.
         self.workers = workers if source is None else 1
@@ -237,6 +235,9 @@ class EstimateRun:
             sut = (config.controller, config.safety_layer)
             try_sut(config.scenario, config.field, config.env, *sut, "the estimate")
             source = encounters
+        # Once the models have loaded (a file that does not is named by its loader).
+        config = config.model_copy(update={"digests": models_of(config).digests()})
+        self.config = config
         self.source = source
         self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
         self._pool: ProcessPoolExecutor | None = None
