@@ -154,7 +154,7 @@ def test_an_estimate_holding_a_symbolic_link_is_refused_and_nothing_is_written_t
             EstimateRun(config, received, source=toy).run()
         assert str(error.value) == (
             f"{received}: batches is a symbolic link (an estimate holds none; it is not "
-            "followed): put what it links to in its place, or choose another --out"
+            "followed): put what it links to in its place"
         )
     assert sorted(p.name for p in elsewhere.iterdir()) == before
     assert json.loads((received / "config.json").read_text())["episodes"] == 300

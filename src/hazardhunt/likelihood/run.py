@@ -440,7 +440,7 @@ def check_no_links(directory: Path) -> None:
     if link is not None:
         raise InputError(
             f"{directory}: {link} is a symbolic link (an estimate holds none; it is not "
-            "followed): put what it links to in its place, or choose another --out"
+            "followed): put what it links to in its place"
         )
 
 
