@@ -385,7 +385,12 @@ def _drawn(
             "is drawn here is not the failure the estimate counted."
         )
         changed.append(Text(said, "warning"))
-        warnings.warn(f"{directory}: {said}", stacklevel=2)
+        warnings.warn(
+            f"{directory}: the most likely failure of {name} (episode {episode}) {did} when "
+            "replayed from its draw: the SUT or the model has changed since the estimate was "
+            "made (the report draws it as such)",
+            stacklevel=2,
+        )
     samples = tuple(result.trajectory or ())
     stem = scratch / "figures" / f"likeliest-{episode}"
     picture = plot_episode(
