@@ -482,6 +482,7 @@ def test_a_failure_of_an_estimate_replays_exactly_from_its_row_and_the_report_dr
     assert (tmp_path / "est" / "report" / "tables" / "classes.csv").exists()
     commands_for_runs_name_an_estimate(tmp_path / "est", likeliest["episode"])
     damaged_estimates_are_named_and_mend(tmp_path / "est", done.args[3:])
+    received_estimates_that_do_not_replay_are_one_line(tmp_path / "est")
     # More episodes for the same estimate: its batch size is kept without --batch-size.
     command = [*done.args[3:]]
     command[command.index("--episodes") + 1] = "150"
@@ -506,6 +507,48 @@ def commands_for_runs_name_an_estimate(directory, episode):
         [line] = refused.stderr.strip().splitlines()
         assert f"{directory}: an estimate, not a run; 'hazardhunt report {directory}'" in line
     assert not elsewhere.exists()
+
+
+def received_estimates_that_do_not_replay_are_one_line(directory):
+    """The report of a received estimate whose most likely failure's draw is out of the
+    model's range, whose model changed since or whose summary nests too deep to read is a
+    one-line error naming the file, and writes nothing."""
+    from hazardhunt.analysis.risk_report import write_estimate_report
+    from hazardhunt.errors import InputError
+
+    summary = json.loads((directory / "estimate.json").read_text())
+    episode = summary["most_likely"]["all"]["episode"]
+    batch = directory / "batches" / f"{episode // 50:05d}.parquet"
+    played = batch.read_bytes()
+    for value, said in ((np.nan, "x.destination is nan"), (99.0, "x.destination is 99.0")):
+        table = pd.read_parquet(batch)
+        table.loc[table["episode"] == episode, "x.destination"] = value
+        table.to_parquet(batch, index=False)
+        with pytest.raises(InputError) as error:
+            write_estimate_report(directory)
+        assert str(error.value).startswith(f"{batch}: episode {episode}: {said}, which the model")
+        assert "\n" not in str(error.value)
+    batch.write_bytes(played)
+    configured = (directory / "config.json").read_text()
+    config = json.loads(configured)
+    config["digests"]["people"] = "0" * 64  # as an estimate made on another model records
+    (directory / "config.json").write_text(json.dumps(config))
+    with pytest.raises(InputError) as error:
+        write_estimate_report(directory)
+    assert str(error.value) == (
+        f"people.toml (built-in): changed since the estimate in {directory} was made (its "
+        "SHA-256 is not the one config.json records for people): its most likely failures "
+        "cannot be replayed on it; restore it to report on the estimate"
+    )
+    (directory / "config.json").write_text(configured)
+    written = (directory / "estimate.json").read_text()
+    (directory / "estimate.json").write_text("[" * 200_000 + "]" * 200_000)
+    shown = hazardhunt("report", directory, cwd=ROOT)
+    assert shown.returncode == 2, shown.stderr
+    [line] = shown.stderr.strip().splitlines()
+    assert line.startswith(f"error: {directory / 'estimate.json'}: cannot be read (")
+    (directory / "estimate.json").write_text(written)
+    assert not (directory / ".report.partial").exists()
 
 
 def damaged_estimates_are_named_and_mend(directory, command):

@@ -1,9 +1,11 @@
 """The report of an estimate (``hazardhunt report ESTIMATE_DIR``): how likely a failure is, per
 class, how the estimate converged against episodes, and the most likely failures drawn.
 
-The most likely failures are replayed from their draws against the estimate's SUT; an estimate
-that names a plug-in (controller, safety layer or model of people by import path) is data
-whose code is not run: its failures are listed, not drawn.
+The most likely failures are replayed from their draws against the estimate's SUT, once each
+draw is checked to be one of the model's and the models to be the ones the estimate recorded;
+one that no longer fails is drawn as what it did, not as a failure. An estimate that names a
+plug-in (controller, safety layer or model of people by import path) is data whose code is not
+run: its failures are listed, not drawn.
 """
 
 from __future__ import annotations
@@ -11,11 +13,13 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import matplotlib
+import numpy as np
 import pandas as pd
 from markupsafe import Markup, escape
 from matplotlib.figure import Figure
@@ -30,11 +34,22 @@ from hazardhunt.likelihood.results import NOTES, estimate_record_problem
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     batch_path,
+    check_no_links,
     draw_of,
     encounters_of,
     load_config,
+    models_of,
     played_batches,
 )
+
+REPLAYED = {
+    "goal": "reached the goal",
+    "timeout": "timed out",
+    "stall": "stalled (its emergency stop held too long)",
+    "safe_contact": "ended in a safe contact",
+    "sut_error": "ended in a SUT error",
+}
+"""What a replay that does not fail did, by its outcome."""
 
 
 def is_estimate(directory: Path) -> bool:
@@ -49,6 +64,7 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
         InputError: The estimate is not finished (no ``estimate.json``: run the command again).
     """
     say = tell or (lambda step: None)
+    check_no_links(directory)
     config = load_config(directory)
     path = directory / "estimate.json"
     if not path.is_file():
@@ -60,7 +76,7 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
         summary = json.loads(path.read_text())
         if (problem := estimate_record_problem(summary)) is not None:
             raise ValueError(f"not an estimate's summary: {problem}")
-    except (OSError, UnicodeDecodeError, ValueError) as error:  # JSONDecodeError too
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as error:  # JSON's too
         raise InputError(
             f"{path}: cannot be read ({error}); run the estimate's hazardhunt estimate command "
             "again to write it anew from the batches"
@@ -78,6 +94,7 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
                 "not hold; run the estimate's hazardhunt estimate command again to write it "
                 "anew from the batches"
             )
+    replays = _replays(directory, config, summary.get("most_likely") or {}, episodes)
     final = directory / "report"
     scratch = directory / ".report.partial"
     shutil.rmtree(scratch, ignore_errors=True)
@@ -85,7 +102,7 @@ def write_estimate_report(directory: Path, tell: Callable[[str], None] | None = 
     sections = [_probabilities(scratch, config, summary), _convergence(scratch, summary)]
     # Class names are text, never matplotlib's mathtext.
     with matplotlib.rc_context({"text.parse_math": False}):
-        sections.append(_most_likely(scratch, config, summary, episodes, say))
+        sections.append(_most_likely(scratch, directory, summary, replays, say))
     facts = (
         f"{shown_scenario(config.scenario)}, field {config.field}, {summary['method']}, "
         f"{summary['episodes']:,} episodes, seed {config.seed}"
@@ -238,11 +255,83 @@ def _convergence(scratch: Path, summary: dict[str, Any]) -> Section:
     return section
 
 
+class Replays(NamedTuple):
+    """The most likely failures to replay: the encounters they are played in, and each one's
+    class (``all`` for the likeliest of all), episode and draw."""
+
+    source: SimulationEncounters
+    draws: list[tuple[str, int, Draw]]
+
+
+def _replays(
+    directory: Path, config: EstimateConfig, likeliest: dict[str, Any], episodes: pd.DataFrame
+) -> Replays | None:
+    """The most likely failures' draws, checked before anything is written; None when there
+    is none, or the estimate names plug-ins (whose code a report does not run).
+
+    Raises:
+        InputError: A model the estimate recorded has changed since (its file names it), or a
+            draw is not one of the model's (its batch names it).
+    """
+    plugins = config.controller or config.safety_layer or (config.people and ":" in config.people)
+    if plugins or not likeliest:
+        return None
+    if config.digests is not None:
+        models = models_of(config)
+        current = models.digests()
+        changed = next((k for k in config.digests if config.digests[k] != current.get(k)), None)
+        if changed is not None:
+            raise InputError(
+                f"{models.source(changed)}: changed since the estimate in {directory} was made "
+                f"(its SHA-256 is not the one config.json records for {changed}): its most "
+                "likely failures cannot be replayed on it; restore it to report on the estimate"
+            )
+    source = encounters_of(config)
+    rows = episodes.drop_duplicates("episode").set_index("episode")
+    draws: list[tuple[str, int, Draw]] = []
+    for name, found in likeliest.items():
+        if found["episode"] not in {episode for _, episode, _ in draws}:  # all's is a class's
+            row = rows.loc[found["episode"]]
+            draws.append((name, found["episode"], _checked_draw(directory, row, source)))
+    return Replays(source, draws)
+
+
+def _checked_draw(directory: Path, row: Any, source: SimulationEncounters) -> Draw:
+    """The draw an episode's row records, if it is one of the model's.
+
+    Raises:
+        InputError: A value the model does not draw (out of range, not a number) or a column
+            missing, naming the batch.
+    """
+    batch = row.get("batch")
+    shown = batch_path(directory, int(batch)) if isinstance(batch, int | np.integer) else "batches"
+    where = f"{shown}: episode {row.name}"
+    mend = (
+        "the batch changed since it was played (delete it and run the estimate's hazardhunt "
+        "estimate command again to play it anew), or the model since the estimate was made"
+    )
+    try:
+        draw = draw_of(row, source.dimensions)
+    except KeyError as error:
+        raise InputError(f"{where}: no column {error}, a part of its draw: {mend}") from None
+    except (TypeError, ValueError) as error:
+        raise InputError(f"{where}: its draw is not numbers ({error}): {mend}") from None
+    for dim in source.dimensions:
+        value = draw.values[dim.name]
+        if not math.isfinite(dim.log_prob(value)):
+            raise InputError(
+                f"{where}: x.{dim.name} is {value!r}, which the model does not draw: {mend}"
+            )
+    if draw.seed < 0:
+        raise InputError(f"{where}: noise_seed is {draw.seed}, not a seed (>= 0): {mend}")
+    return draw
+
+
 def _most_likely(
     scratch: Path,
-    config: EstimateConfig,
+    directory: Path,
     summary: dict[str, Any],
-    episodes: pd.DataFrame,
+    replays: Replays | None,
     say: Callable[[str], None],
 ) -> Section:
     section = Section(
@@ -259,8 +348,7 @@ def _most_likely(
         for name, found in likeliest.items()
     ]
     section.blocks.append(_table(scratch, "most_likely", pd.DataFrame(rows)))
-    plugins = [config.controller, config.safety_layer]
-    if any(plugins) or (config.people is not None and ":" in config.people):
+    if replays is None:
         section.blocks.append(
             Text(
                 "Not drawn: the estimate names plug-ins, whose code a report does not run. "
@@ -269,25 +357,40 @@ def _most_likely(
         )
         return section
     say("replaying the most likely failures")
-    source = encounters_of(config)
-    rows_by_episode = episodes.set_index("episode")
-    drawn: set[int] = set()
-    for name, found in likeliest.items():
-        if found["episode"] in drawn:  # the likeliest of all is also its class's
-            continue
-        drawn.add(found["episode"])
-        draw = draw_of(rows_by_episode.loc[found["episode"]], source.dimensions)
-        section.blocks += _drawn(scratch, source, draw, name, found["episode"])
+    for name, episode, draw in replays.draws:
+        section.blocks += _drawn(scratch, directory, replays.source, draw, name, episode)
     return section
 
 
 def _drawn(
-    scratch: Path, source: SimulationEncounters, draw: Draw, name: str, episode: int
+    scratch: Path,
+    directory: Path,
+    source: SimulationEncounters,
+    draw: Draw,
+    name: str,
+    episode: int,
 ) -> list[Block]:
-    """One failure replayed from its draw: its tracks, its last seconds and its draw."""
+    """One failure replayed from its draw: its tracks, its last seconds and its draw; said
+    plainly when the replay does not fail (the SUT or the model changed since)."""
     result = source.episode(draw, keep_trajectory=True)
     simulation = source.simulation
     title = f"{name}: episode {episode}"
+    changed: list[Block] = []
+    if result.summary.outcome != "failure":
+        did = REPLAYED.get(str(result.summary.outcome), str(result.summary.outcome))
+        title += f" (replayed: {did}, no longer a failure)"
+        said = (
+            f"Episode {episode} failed when the estimate played it; replayed from its draw, it "
+            f"{did}: the SUT or the model has changed since the estimate was made, and what "
+            "is drawn here is not the failure the estimate counted."
+        )
+        changed.append(Text(said, "warning"))
+        warnings.warn(
+            f"{directory}: the most likely failure of {name} (episode {episode}) {did} when "
+            "replayed from its draw: the SUT or the model has changed since the estimate was "
+            "made (the report draws it as such)",
+            stacklevel=2,
+        )
     samples = tuple(result.trajectory or ())
     stem = scratch / "figures" / f"likeliest-{episode}"
     picture = plot_episode(
@@ -310,6 +413,7 @@ def _drawn(
         f"{key} {value:.3g}" for key, value in draw.values.items() if math.isfinite(value)
     )
     return [
+        *changed,
         image(picture, title),
         image(animation, f"{name}: the last 6 s"),
         Prose(Markup("Draw: {}").format(escape(values))),

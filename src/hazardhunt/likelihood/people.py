@@ -104,14 +104,28 @@ def check_model(name: str, model: HumanModel, seed: int = 0) -> None:
     """
     rng = np.random.default_rng(seed)
     for _ in range(CHECK_SAMPLES):
-        values = model_sample(model, rng)
-        for dim in model.dimensions:
-            value = dim.log_prob(values[dim.name])
-            if not math.isfinite(value):
-                raise ModelError(
-                    f"people model {name}: {dim.name}: log_prob is {value} on its own draw "
-                    f"{values[dim.name]!r}"
-                )
+        finite_log_prob(f"people model {name}", model.dimensions, model_sample(model, rng))
+
+
+def finite_log_prob(
+    model: str, dims: Sequence[Dimension], values: Mapping[str, float], which: str = ""
+) -> float:
+    """The log-likelihood of a draw of ``model``'s ``dims`` (``which`` says which, for a
+    message).
+
+    Raises:
+        ModelError: A dimension's log-likelihood is not finite on it.
+    """
+    total = 0.0
+    for dim in dims:
+        value = dim.log_prob(values[dim.name])
+        if not math.isfinite(value):
+            raise ModelError(
+                f"{model}: {dim.name}: log_prob is {value} on its own draw "
+                f"{values[dim.name]!r}{which}"
+            )
+        total += value
+    return total
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ from pydantic import TypeAdapter, ValidationError
 from typing_extensions import NotRequired, TypedDict  # which pydantic validates on Python 3.11
 
 from hazardhunt.likelihood.estimators import Estimate, either_of, episodes_for, estimate
+from hazardhunt.likelihood.people import DEFAULT_MODEL, ModelError
 from hazardhunt.likelihood.run import (
     EstimateConfig,
     EstimateError,
@@ -85,10 +86,12 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
     Raises:
         EstimateError: No episode the estimate counts was tested (each ended in a SUT error),
             every sample of a splitting level did, or a weight overflows.
+        ModelError: An episode's log-likelihood under the model is not finite.
     """
     untested = nothing_tested(config, table)
     if untested is not None:
         raise EstimateError(untested)
+    _check_likelihoods(config, table)
     classes_found = sorted(set(table.loc[table["failure"], "failure_class"]))
     if config.estimator.method == "splitting":
         overall, classes, points, counted = _splitting(config, table, classes_found, threshold)
@@ -115,6 +118,20 @@ def summarise(config: EstimateConfig, table: pd.DataFrame, threshold: float) -> 
         "levels_warning": _stuck(levels, table),
         "most_likely": most_likely(table),
     }
+
+
+def _check_likelihoods(config: EstimateConfig, table: pd.DataFrame) -> None:
+    """Raises ModelError if an episode's log-likelihood under the model is not finite (a
+    batch played before such a draw was refused): no estimate is given from it."""
+    log_p = table["log_p"].to_numpy(float)
+    bad = ~np.isfinite(log_p)
+    if bad.any():
+        first = int(np.argmax(bad))
+        raise ModelError(
+            f"people model {config.people or DEFAULT_MODEL}: log_prob is {log_p[first]} on "
+            f"the draw of episode {int(table['episode'].iloc[first])}: no estimate is given "
+            "from a likelihood that is not a number; mend the model and estimate anew"
+        )
 
 
 def _untested(

@@ -8,7 +8,11 @@ written whole or not at all, so an interrupted estimate resumes at its first mis
 plays exactly the episodes it would have played (each batch's draws come from the seed and the
 batch's number, its proposal from the batches before it).
 
-The directory is data: nothing in it is imported or called.
+The directory is data: nothing in it is imported or called, and it holds no symbolic link.
+
+The module is long because the directory is one format: what writes it (the run, its batches,
+its worker processes) and what checks a directory before anything is played in it (claiming,
+resuming, extending, the models it recorded) are kept side by side.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from hazardhunt.campaign.config import EnvOptions, first_difference, scenario_field
 from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.simulations import build_simulation, try_sut
+from hazardhunt.campaign.store import symbolic_link_in
 from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.encounters import (
@@ -45,7 +50,14 @@ from hazardhunt.likelihood.estimators import (
     Planner,
     SamplingPlanner,
 )
-from hazardhunt.likelihood.people import load_model
+from hazardhunt.likelihood.model_record import Models, models_recorded
+from hazardhunt.likelihood.people import (
+    CHECK_SAMPLES,
+    DEFAULT_MODEL,
+    ModelError,
+    finite_log_prob,
+    load_model,
+)
 from hazardhunt.likelihood.splitting import SplittingPlanner
 from hazardhunt.likelihood.uncertainty import load_uncertainties
 from hazardhunt.processes import die_with_parent
@@ -72,6 +84,10 @@ class EstimateConfig(BaseModel):
     estimator: EstimatorParams = EstimatorParams()
     episodes: int = Field(default=2000, ge=MIN_EPISODES, le=10_000_000)
     seed: int = Field(default=0, ge=0, le=2**32 - 1)
+    digests: dict[str, str] | None = None
+    """The SHA-256 of the models its batches were played on, by option (``scenario``,
+    ``people``, ``uncertainties``: :mod:`~hazardhunt.likelihood.model_record`), recorded when
+    it starts; None in an estimate of a version that recorded none, or not yet started."""
 
     _field_ok = field_validator("field")(scenario_field)
 
@@ -166,6 +182,11 @@ def planner_of(config: EstimateConfig, dims: tuple[Dimension, ...], threshold: f
     return kind(config.estimator, dims, threshold, config.episodes, config.seed)
 
 
+def models_of(config: EstimateConfig) -> Models:
+    """What ``config``'s encounters are drawn from and played on."""
+    return Models(config.scenario, config.people, config.uncertainties)
+
+
 def encounters_of(config: EstimateConfig) -> SimulationEncounters:
     """The encounters of ``config``: its simulation, people and uncertainties.
 
@@ -204,7 +225,6 @@ class EstimateRun:
                 nothing is written.
         """
         check_budget(config)
-        self.config = config
         self.directory = directory
         # Built here from ``config``, the encounters can be built again in worker processes.
         self.workers = workers if source is None else 1
@@ -215,6 +235,9 @@ class EstimateRun:
             sut = (config.controller, config.safety_layer)
             try_sut(config.scenario, config.field, config.env, *sut, "the estimate")
             source = encounters
+        # Once the models have loaded (a file that does not is named by its loader).
+        config = config.model_copy(update={"digests": models_of(config).digests()})
+        self.config = config
         self.source = source
         self.dimensions: tuple[Dimension, ...] = tuple(self.source.dimensions)
         self._pool: ProcessPoolExecutor | None = None
@@ -246,9 +269,13 @@ class EstimateRun:
                 played = sum(len(t) for t in tables)
                 if progress is not None:
                     progress(played, config.episodes)
-                table = self._table(len(tables), played, plan, self._play(plan.draws))
+                log_p = self._log_likelihoods(played, plan.draws)
+                table = self._table(len(tables), played, plan, log_p, self._play(plan.draws))
                 _write_batch(self.directory, len(tables), table, plan.record)
                 tables.append(table)
+        except ModelError as error:
+            self._discard(len(tables))
+            raise ModelError(f"{error}; no estimate is given, and nothing of it was kept") from None
         finally:
             self.close()
         if progress is not None:
@@ -284,19 +311,37 @@ class EstimateRun:
             )
         return list(self._pool.map(_play_in_worker, batch_draws, chunksize=4))
 
+    def _log_likelihoods(self, first: int, draws: Sequence[Draw]) -> list[float]:
+        """The log-likelihood of each draw (episodes ``first``, ...) under the model.
+
+        Raises:
+            ModelError: A dimension's is not finite on a draw of its own, past the ones
+                checked before the estimate (:func:`~.people.check_model`).
+        """
+        model = f"people model {self.config.people or DEFAULT_MODEL}"
+        checked = f", past the {CHECK_SAMPLES} draws checked before the estimate"
+        return [
+            finite_log_prob(model, self.dimensions, draw.values, f" (episode {n}{checked})")
+            for n, draw in enumerate(draws, start=first)
+        ]
+
     def _table(
-        self, batch: int, first: int, plan: PlannedBatch, played: Sequence[Played]
+        self,
+        batch: int,
+        first: int,
+        plan: PlannedBatch,
+        log_p: Sequence[float],
+        played: Sequence[Played],
     ) -> pd.DataFrame:
         rows = []
         for i, (draw, outcome) in enumerate(zip(plan.draws, played, strict=True)):
-            log_p = sum(dim.log_prob(draw.values[dim.name]) for dim in self.dimensions)
             rows.append(
                 {
                     "episode": first + i,
                     "batch": batch,
                     **{f"x.{name}": value for name, value in draw.values.items()},
                     "noise_seed": draw.seed,
-                    "log_p": log_p,
+                    "log_p": log_p[i],
                     **{name: column[i] for name, column in plan.columns.items()},
                     **played_row(outcome),
                 }
@@ -355,26 +400,48 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
     plain Monte Carlo estimate whose budget this one extends (:func:`_check_extension`)."""
     path = directory / "config.json"
     wanted = config.model_dump(mode="json")
+    check_no_links(directory)
     _check_holds_no_other(directory)
     if path.exists():
         # Read as a configuration, so that settings added since it was written take their
         # defaults: an estimate of an earlier version resumes.
         found = load_config(directory)
-        if found.model_dump(mode="json") == wanted:
+        asked = config.model_copy(update={"digests": found.digests})
+        same = found.model_dump(mode="json") == asked.model_dump(mode="json")
+        if not same:
+            extended = found.model_copy(update={"episodes": config.episodes})
+            if extended.model_dump(mode="json") != asked.model_dump(mode="json"):
+                raise InputError(
+                    f"{directory}: holds an estimate of another configuration "
+                    f"({first_difference(found, asked)}); choose another --out or give the "
+                    "same options to resume it"
+                )
+            _check_extension(directory, found, config)
+        assert config.digests is not None, "taken before the directory is claimed"
+        # Nothing played yet, nothing to mix: the models are recorded as they are now.
+        recorded = batch_path(directory, 0).exists() and models_recorded(
+            directory, found.digests, models_of(config), config.digests
+        )
+        if same and recorded:
             return
-        if found.model_copy(update={"episodes": config.episodes}).model_dump(mode="json") != wanted:
-            raise InputError(
-                f"{directory}: holds an estimate of another configuration "
-                f"({first_difference(found, config)}); choose another --out or give the same "
-                "options to resume it"
-            )
-        _check_extension(directory, found, config)
-        # The result of the smaller budget no longer describes the directory.
-        (directory / "estimate.json").unlink(missing_ok=True)
+        if not same:  # the result of the smaller budget no longer describes the directory
+            (directory / "estimate.json").unlink(missing_ok=True)
     directory.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
     partial.write_text(json.dumps(wanted, indent=1) + "\n")
     partial.replace(path)
+
+
+def check_no_links(directory: Path) -> None:
+    """Raises InputError if ``directory`` holds a symbolic link: an estimate holds none, as a
+    run holds none, and nothing is read or written through one (a ``batches`` linked elsewhere
+    would take the estimate's files outside its directory)."""
+    link = symbolic_link_in(directory) if directory.is_dir() else None
+    if link is not None:
+        raise InputError(
+            f"{directory}: {link} is a symbolic link (an estimate holds none; it is not "
+            "followed): put what it links to in its place"
+        )
 
 
 def _check_holds_no_other(directory: Path) -> None:
@@ -387,7 +454,7 @@ def _check_holds_no_other(directory: Path) -> None:
     if path.exists():
         try:
             stored = json.loads(path.read_text())
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):
             return
         if not isinstance(stored, dict) or "estimator" in stored or "scenario" in stored:
             return
