@@ -24,6 +24,7 @@ from typer.core import TyperCommand, TyperGroup
 
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
+from hazardhunt.sut.guard import notice_ctrl_c
 from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
 from hazardhunt.warning_lines import show_warnings_in_one_line
@@ -1258,7 +1259,9 @@ _one_line_summaries()
 def run() -> None:
     """Entry point: an error hazardhunt raises is one clear line on stderr and its exit code (2
     for bad input, see :mod:`hazardhunt.errors`), a file that cannot be written one line and
-    exit code 1, a warning it gives one line too, and Ctrl-C says how to resume."""
+    exit code 1, a warning it gives one line too, and Ctrl-C says how to resume (told from a
+    ``KeyboardInterrupt`` a plug-in raises, which is the plug-in's error)."""
+    notice_ctrl_c()
     show_warnings_in_one_line(
         lambda text: err_console.print(f"[yellow]warning:[/yellow] {escape(text)}", highlight=False)
     )

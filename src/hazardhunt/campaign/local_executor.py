@@ -218,7 +218,7 @@ def _serve(connection: Connection, campaign_pid: int, runs_directory: Path) -> N
             return
         try:
             outcome = RunOutcome(run, _run_in_worker(run, runs_directory, connection))
-        except Exception as error:
+        except BaseException as error:  # SystemExit too: the run failed, not the worker
             outcome = failed(run, error)
         connection.send(outcome)
 

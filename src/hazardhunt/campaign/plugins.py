@@ -13,22 +13,28 @@ again or trusts the file's plug-ins, and says which module is about to be import
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from pydantic import BaseModel, ConfigDict
 
+from hazardhunt.errors import HazardhuntError
+from hazardhunt.spec.episode import EpisodeSummary, TrajectorySample
 from hazardhunt.spec.failure_classes import (
     FailureClassifier,
     MechanismClassifier,
     adapt_classifier,
 )
+from hazardhunt.sut.guard import is_plugin_fault, raised
 from hazardhunt.sut.plugins import PluginError, build, build_controller, build_safety_layer
 from hazardhunt.sut.protocols import Controller, SafetyLayer
+from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.base import Tester
 from hazardhunt.testers.registry import build_tester
 from hazardhunt.world.bodies import RobotParams
+
+T = TypeVar("T")
 
 
 class PluginSpec(BaseModel):
@@ -135,4 +141,44 @@ def make_classifier(
     classifier: FailureClassifier = build(
         "failure classifier", spec.path, spec.params, FailureClassifier, spec.search_path
     )
-    return adapt_classifier(spec.path, classifier)
+    return _Exitless(spec.path, adapt_classifier(spec.path, classifier))
+
+
+class ClassifierExitError(HazardhuntError):
+    """A classifier of one's own raised ``SystemExit`` or another ``BaseException`` that is no
+    ``Exception`` (not the user's Ctrl-C); the message names it and where it raised."""
+
+
+class _Exitless:
+    """A classifier of one's own whose ``SystemExit`` (``GeneratorExit``, a ``KeyboardInterrupt``
+    of its own, ...) is a :class:`ClassifierExitError`: what a run records as the failure's
+    classifier error, and what ``report``, ``export`` and ``regress`` stop at in one line,
+    where it would end the command silently. Its exceptions go through as they are."""
+
+    def __init__(self, path: str, classifier: FailureClassifier) -> None:
+        self.path = path
+        self.classifier = classifier
+
+    @property
+    def name(self) -> str:
+        return str(self.classifier.name)
+
+    def classes_for(self, field: FieldShape) -> tuple[str, ...]:
+        return self._call("classes_for()", self.classifier.classes_for, field)
+
+    def classify(
+        self, trajectory: Sequence[TrajectorySample], summary: EpisodeSummary, field: FieldShape
+    ) -> str:
+        return self._call("classify()", self.classifier.classify, trajectory, summary, field)
+
+    def _call(self, call: str, method: Callable[..., T], *args: Any) -> T:
+        try:
+            return method(*args)
+        except Exception:
+            raise
+        except BaseException as error:  # SystemExit, GeneratorExit, ...
+            if not is_plugin_fault(error):
+                raise
+            raise ClassifierExitError(
+                f"failure classifier {self.path!r}: {call} raised {raised(error)}"
+            ) from error

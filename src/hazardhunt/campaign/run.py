@@ -18,7 +18,6 @@ import json
 import platform
 import shutil
 import time
-import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
@@ -44,7 +43,9 @@ from hazardhunt.campaign.scenario_record import SCENARIO_FILE, played_before_cha
 from hazardhunt.campaign.simulations import check_sut, simulation_of
 from hazardhunt.campaign.store import RunStore, file_checksums, find_damage, write_json_atomic
 from hazardhunt.env.agv import AGVEnv
+from hazardhunt.sim.simulation import UnusableActionError
 from hazardhunt.spec.failure_classes import OTHER
+from hazardhunt.sut.guard import is_plugin_fault, raised
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers import make_tester
 from hazardhunt.testers.base import EpisodeRecord, EpisodeRecorder, Tester, reward_of
@@ -136,7 +137,7 @@ def record_run(
         progress(RunProgress(0, config.episodes, 0, 0.0))
     _explore(config, tester, recorder)
     _check_played(config, store)
-    tester.save(directory / "tester")
+    _call_tester(config, functools.partial(tester.save, directory / "tester"), "save()")
     store.close()
     wall_time = time.perf_counter() - clock
     summary = _run_summary(config, store, simulation.field, wall_time, started_at)
@@ -161,21 +162,47 @@ def _explore(config: RunConfig, tester: Tester, recorder: EpisodeRecorder) -> No
     """The tester plays the run's episodes.
 
     Raises:
-        RunFailed: A user's tester raised (where in its code, in one line).
+        RunFailed: The tester raised (:func:`_call_tester`).
     """
     try:
-        tester.explore(recorder, config.episodes)
-    except Exception as error:
-        if config.tester_plugin is None or isinstance(error, RunFailed):
-            raise  # a built-in tester's error is hazardhunt's, shown whole
-        frame = traceback.extract_tb(error.__traceback__)[-1]
-        raise RunFailed(
-            f"run {config.run_id}: tester {config.tester_plugin.path!r} raised "
-            f"{type(error).__name__}: {error} ({frame.filename}, line {frame.lineno}); "
-            "nothing of the run was kept"
-        ) from error
+        _call_tester(config, functools.partial(tester.explore, recorder, config.episodes))
     finally:
         recorder.close()  # the worker processes of batches played on several cores
+
+
+def _call_tester(config: RunConfig, method: Callable[[], None], call: str | None = None) -> None:
+    """Call one of the run's tester's methods (``call`` names it in messages, unless it is
+    ``explore``).
+
+    Raises:
+        RunFailed: A user's tester raised (where in its code, in one line), ``SystemExit``,
+            a ``KeyboardInterrupt`` of its own and any other ``BaseException`` too; or any
+            tester played an action that is not two finite numbers, or raised what is not an
+            ``Exception`` (a plug-in's, as a portfolio arm). The user's Ctrl-C goes through;
+            a built-in tester's other errors are hazardhunt's, shown whole.
+    """
+    try:
+        method()
+    except BaseException as error:  # a plug-in may raise anything, SystemExit too
+        hazardhunts = config.tester_plugin is None and isinstance(error, Exception)
+        if hazardhunts and not isinstance(error, UnusableActionError):
+            raise  # a built-in tester's bug, shown whole
+        if isinstance(error, RunFailed) or not is_plugin_fault(error):
+            raise
+        name = config.tester if config.tester_plugin is None else config.tester_plugin.path
+        where = "" if call is None else f", in {call},"
+        raise RunFailed(
+            f"run {config.run_id}: tester {name!r}{where} {_what_went_wrong(error)}; "
+            "nothing of the run was kept"
+        ) from error
+
+
+def _what_went_wrong(error: BaseException) -> str:
+    """What a tester did, in a few words: an unusable action played, or what it raised and
+    where in its code."""
+    if isinstance(error, UnusableActionError):
+        return f"played an unusable action: {error}"
+    return f"raised {raised(error)}"
 
 
 def _check_played(config: RunConfig, store: RunStore) -> None:

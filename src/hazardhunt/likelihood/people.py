@@ -17,8 +17,10 @@ the scenario (``Class(scenario=...)``), with the members of :class:`HumanModel`.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import reprlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -27,7 +29,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hazardhunt.errors import InputError
+from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.likelihood.distributions import (
     Dimension,
     DistributionError,
@@ -37,7 +39,8 @@ from hazardhunt.likelihood.distributions import (
     log_prob,
     sample,
 )
-from hazardhunt.sim.simulation import Action, Policy, Simulation
+from hazardhunt.sim.simulation import Action, Policy, Simulation, UnusableActionError, human_action
+from hazardhunt.sut.guard import is_plugin_fault, raised
 from hazardhunt.sut.plugins import build
 from hazardhunt.textfiles import TOMLDecodeError, loads_toml
 from hazardhunt.world.bodies import HumanParams
@@ -69,6 +72,11 @@ duration played as none, so that the estimate would be of another model than the
 
 class ModelError(InputError):
     """A model of people that cannot be used; the message names the file or plug-in."""
+
+
+class ModelPlayError(HazardhuntError):
+    """A model of people of one's own that raised, or gave the human an action that is not two
+    finite numbers, while an encounter was played; the message names the plug-in."""
 
 
 @runtime_checkable
@@ -104,7 +112,17 @@ def check_model(name: str, model: HumanModel, seed: int = 0) -> None:
     """
     rng = np.random.default_rng(seed)
     for _ in range(CHECK_SAMPLES):
-        finite_log_prob(f"people model {name}", model.dimensions, model_sample(model, rng))
+        try:
+            values = model_sample(model, rng)
+            finite_log_prob(f"people model {name}", model.dimensions, values)
+        except ModelError:
+            raise
+        except BaseException as error:  # a dimension of one's own may raise anything
+            if not is_plugin_fault(error):
+                raise
+            raise ModelError(
+                f"people model {name}: drawing a behaviour raised {raised(error)}"
+            ) from error
 
 
 def finite_log_prob(
@@ -126,6 +144,89 @@ def finite_log_prob(
             )
         total += value
     return total
+
+
+class PluginModel:
+    """A model of people of one's own (an import path), called through guards: what its
+    ``policy`` or the policy it returns raises (``SystemExit`` too), a policy that is not
+    callable and an action that is not two finite numbers are a :class:`ModelPlayError` naming
+    it, never an episode played."""
+
+    def __init__(self, path: str, model: HumanModel) -> None:
+        """Raises ModelError: its ``dimensions`` raise, or are not Dimensions."""
+        self.path = path
+        self.model = model
+        try:
+            dims = model.dimensions
+        except BaseException as error:  # a plug-in may raise anything
+            if not is_plugin_fault(error):
+                raise
+            raise ModelError(f"people model {path!r}: dimensions raised {raised(error)}") from None
+        if not isinstance(dims, Sequence) or not all(isinstance(d, Dimension) for d in dims):
+            raise ModelError(
+                f"people model {path!r}: dimensions must be a sequence of "
+                "hazardhunt.likelihood.distributions.Dimension"
+            )
+        self.dimensions: tuple[Dimension, ...] = tuple(dims)
+
+    def policy(self, values: Mapping[str, float], simulation: Simulation) -> Policy:
+        """The model's policy for ``values``, its every action checked.
+
+        Raises:
+            ModelPlayError: ``policy()`` raised, or returned something that is not callable.
+        """
+        try:
+            policy = self.model.policy(values, simulation)
+        except BaseException as error:  # a plug-in may raise anything
+            if not is_plugin_fault(error):
+                raise
+            raise ModelPlayError(
+                f"people model {self.path!r}: policy() raised {raised(error)}"
+            ) from error
+        if not callable(policy):
+            raise ModelPlayError(
+                f"people model {self.path!r}: policy() returned {reprlib.repr(policy)}, not a "
+                "policy (a callable that gives the human's next action from the simulation)"
+            )
+        return functools.partial(_checked_action, self.path, policy)
+
+
+def _checked_action(path: str, policy: Policy, simulation: Simulation) -> Action:
+    """``policy``'s next action.
+
+    Raises:
+        ModelPlayError: It raised, or the action is not two finite numbers.
+    """
+    try:
+        return human_action(policy(simulation))
+    except UnusableActionError as error:
+        raise ModelPlayError(
+            f"people model {path!r}: its policy's action at {simulation.sim_time:g} s: {error}"
+        ) from None
+    except BaseException as error:  # a plug-in may raise anything
+        if not is_plugin_fault(error):
+            raise
+        raise ModelPlayError(
+            f"people model {path!r}: its policy raised {raised(error)} at {simulation.sim_time:g} s"
+        ) from error
+
+
+def try_model(model: HumanModel, simulation: Simulation, seed: int) -> None:
+    """Play the first decision of one of ``model``'s behaviours (drawn with ``seed``) in
+    ``simulation`` (reset here), so that a model that cannot play stops an estimate before it
+    writes anything.
+
+    Raises:
+        ModelError: The model's policy raised or gave an unusable action (:class:`ModelPlayError`).
+    """
+    values = model_sample(model, np.random.default_rng(seed))
+    simulation.reset()
+    try:
+        model.policy(values, simulation)(simulation)
+    except ModelPlayError as error:
+        raise ModelError(
+            f"{error} (on a trial draw before the estimate; nothing was written)"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -315,8 +416,8 @@ class WalkerPolicy:
 def load_model(spec: str | None, scenario: Scenario) -> HumanModel:
     """The model of people ``spec`` names for ``scenario``: None or ``shopfloor`` for the
     built-in one, a ``.toml`` file of the same form, or the import path of one's own
-    (``package.module:Class``, called as ``Class(scenario=...)``). Its log-likelihood is checked
-    on draws of its own (:func:`check_model`).
+    (``package.module:Class``, called as ``Class(scenario=...)``, a :class:`PluginModel`). Its
+    log-likelihood is checked on draws of its own (:func:`check_model`).
 
     Raises:
         ModelError: It does not load or its log-likelihood is not finite on its own draws.
@@ -327,12 +428,7 @@ def load_model(spec: str | None, scenario: Scenario) -> HumanModel:
     elif spec.endswith(".toml"):
         model = WalkerModel(scenario, spec)
     else:
-        model = build("people model", spec, {"scenario": scenario}, HumanModel, [os.getcwd()])
-        dims = getattr(model, "dimensions", None)
-        if not isinstance(dims, Sequence) or not all(isinstance(d, Dimension) for d in dims):
-            raise ModelError(
-                f"people model {spec!r}: dimensions must be a sequence of "
-                "hazardhunt.likelihood.distributions.Dimension"
-            )
+        built = build("people model", spec, {"scenario": scenario}, HumanModel, [os.getcwd()])
+        model = PluginModel(spec, built)
     check_model(spec or DEFAULT_MODEL, model)
     return model

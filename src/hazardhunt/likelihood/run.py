@@ -55,12 +55,16 @@ from hazardhunt.likelihood.people import (
     CHECK_SAMPLES,
     DEFAULT_MODEL,
     ModelError,
+    ModelPlayError,
+    PluginModel,
     finite_log_prob,
     load_model,
+    try_model,
 )
 from hazardhunt.likelihood.splitting import SplittingPlanner
 from hazardhunt.likelihood.uncertainty import load_uncertainties
 from hazardhunt.processes import die_with_parent
+from hazardhunt.sut.guard import notice_ctrl_c
 from hazardhunt.textfiles import format_validation_error
 
 WALKING_PERIOD = 0.2
@@ -200,6 +204,21 @@ def encounters_of(config: EstimateConfig) -> SimulationEncounters:
     return SimulationEncounters(simulation, model, load_uncertainties(config.uncertainties))
 
 
+def _try_people(config: EstimateConfig, encounters: SimulationEncounters) -> None:
+    """A people model of one's own plays the first decision of a draw, in a simulation of its
+    own (the SUT's plug-ins in the estimate's play its first episode as their first); the
+    built-in model and model files are not tried.
+
+    Raises:
+        ModelError: The model's policy raised or gave an unusable action.
+    """
+    if isinstance(encounters.model, PluginModel):
+        trial = build_simulation(
+            config.scenario, config.field, config.env, config.controller, config.safety_layer
+        )
+        try_model(encounters.model, trial, config.seed)
+
+
 class EstimateRun:
     """Plays an estimate's missing batches into its directory."""
 
@@ -223,6 +242,8 @@ class EstimateRun:
                 budget is too small.
             PluginError: A plug-in of the SUT does not load, or fails on a trial episode;
                 nothing is written.
+            ModelError: A people model of one's own fails on a trial draw (:func:`_try_people`);
+                nothing is written.
         """
         check_budget(config)
         self.directory = directory
@@ -234,6 +255,7 @@ class EstimateRun:
             # episode to the next plays the estimate's first episode as its first.
             sut = (config.controller, config.safety_layer)
             try_sut(config.scenario, config.field, config.env, *sut, "the estimate")
+            _try_people(config, encounters)
             source = encounters
         # Once the models have loaded (a file that does not is named by its loader).
         config = config.model_copy(update={"digests": models_of(config).digests()})
@@ -259,7 +281,9 @@ class EstimateRun:
 
         Raises:
             EstimateError: No episode the estimate counts was tested, each ended in a SUT
-                error (:func:`nothing_tested`); nothing of the estimate is kept.
+                error (:func:`nothing_tested`), or a people model of one's own raised or gave
+                an unusable action (:class:`~hazardhunt.likelihood.people.ModelPlayError`);
+                nothing of the estimate is kept.
         """
         tables = self.played()
         config = self.config
@@ -276,6 +300,10 @@ class EstimateRun:
         except ModelError as error:
             self._discard(len(tables))
             raise ModelError(f"{error}; no estimate is given, and nothing of it was kept") from None
+        except ModelPlayError as error:
+            # Kept, its batches would resume only with the model unchanged, which fails again.
+            self._discard(len(tables))
+            raise EstimateError(f"{error}; nothing of the estimate was kept") from None
         finally:
             self.close()
         if progress is not None:
@@ -512,6 +540,7 @@ _worker: SimulationEncounters | None = None
 def _start_worker(parent_pid: int, config: EstimateConfig) -> None:
     global _worker
     die_with_parent(parent_pid)
+    notice_ctrl_c()
     _worker = encounters_of(config)
 
 

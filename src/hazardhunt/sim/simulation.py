@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import reprlib
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from hazardhunt.errors import InputError
+from hazardhunt.errors import HazardhuntError, InputError
 from hazardhunt.sim.effects import EffectsState, SutEffects
 from hazardhunt.spec.episode import EpisodeSummary, EpisodeTiming, TrajectorySample
 from hazardhunt.spec.outcomes import Outcome, TerminationParams, episode_outcome
@@ -355,7 +356,8 @@ class Simulation:
             raise RuntimeError("call reset() before playing a decision")
         if self.outcome is not None:
             raise RuntimeError(f"the episode has ended ({self.outcome.value}); call reset()")
-        self._actions.append(np.asarray(action, dtype=np.float32).reshape(2).copy())
+        action = human_action(action)
+        self._actions.append(action)
         speed, turn_rate = self.decode_action(action)
         first_step, failures_before = len(self._risks), self._counts.controller_failures
         outcome = None
@@ -761,6 +763,32 @@ class _EpisodeCounts:
         self.closest_robot_position, self.closest_human_velocity = robot_position, human_velocity
 
 
+class UnusableActionError(HazardhuntError, ValueError):
+    """The human's action is not two finite numbers: whoever chose it (a tester, a model of
+    people) is at fault, and the episode is not played."""
+
+
+def human_action(action: object) -> NDArray[np.float32]:
+    """``action`` as the human's normalised (speed, turn rate), a new array.
+
+    Raises:
+        UnusableActionError: It is not two finite numbers (None, NaN, infinite, a string), which
+            no rule turns into a behaviour: clipped, a NaN speed would stand the human still.
+    """
+    try:
+        with np.errstate(over="ignore"):  # beyond a float32's range: infinite, refused below
+            array = np.array(action, dtype=np.float64).astype(np.float32)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.size != 2 or not np.isfinite(array).all():
+        shown = action.tolist() if isinstance(action, np.ndarray) else action
+        raise UnusableActionError(
+            f"the human's action is {reprlib.repr(shown)}, not two finite numbers "
+            "(speed, turn rate)"
+        )
+    return array.reshape(2)
+
+
 class PeriodError(InputError):
     """Time settings of a simulation that cannot work together; the message names the setting,
     its value and what it must be."""
@@ -827,8 +855,8 @@ def _whole_multiple(value: float, unit: float, name: str, unit_name: str) -> int
 
 
 def _named(error: BaseException) -> str:
-    """An error as recorded: ``Type: message``."""
-    return f"{type(error).__name__}: {error}"
+    """An error as recorded: ``Type: message`` (``Type`` alone without a message)."""
+    return f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
 
 
 def _status(error: BaseException) -> str:

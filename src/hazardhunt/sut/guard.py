@@ -20,8 +20,10 @@ import reprlib
 import signal
 import threading
 import time
+import traceback
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 from types import FrameType
 from typing import Any, TypeGuard, TypeVar
 
@@ -234,10 +236,59 @@ class TimeLimit:
 
 
 def is_plugin_fault(error: BaseException) -> bool:
-    """Whether ``error``, raised out of a plug-in's call, is the plug-in's to record (any
-    exception, ``SystemExit`` and any other ``BaseException`` included), rather than the user's
-    Ctrl-C (``KeyboardInterrupt``) or the interpreter's own ``GeneratorExit``."""
-    return not isinstance(error, (KeyboardInterrupt, GeneratorExit, _Alarm))
+    """Whether ``error``, raised out of a plug-in's call, is the plug-in's to record: any
+    exception, ``SystemExit``, ``GeneratorExit`` (the interpreter throws it into a generator
+    being closed, at its ``yield``, never out of a call) and every other ``BaseException``,
+    but the user's Ctrl-C (:func:`is_users_interrupt`) and the time limit's own interruption."""
+    if isinstance(error, KeyboardInterrupt):
+        return not is_users_interrupt()
+    return not isinstance(error, _Alarm)
+
+
+def raised(error: BaseException) -> str:
+    """What a plug-in raised, and where: ``Type: message (file, line N)``, at the last place in
+    the traceback outside hazardhunt's own code (the plug-in's, when it called back into
+    hazardhunt)."""
+    said = f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
+    frames = traceback.extract_tb(error.__traceback__)
+    ours = Path(__file__).parents[1]
+    own = [frame for frame in frames if not Path(frame.filename).is_relative_to(ours)]
+    if not (own or frames):
+        return said
+    frame = (own or frames)[-1]
+    return f"{said} ({frame.filename}, line {frame.lineno})"
+
+
+_ctrl_c_received = False
+
+
+def _on_ctrl_c(signum: int, frame: FrameType | None) -> None:
+    """Python's own SIGINT handler, which also notes that the signal came."""
+    global _ctrl_c_received
+    _ctrl_c_received = True
+    raise KeyboardInterrupt
+
+
+def notice_ctrl_c() -> None:
+    """Handle SIGINT as Python does (a ``KeyboardInterrupt``), noting that it came, so that
+    :func:`is_users_interrupt` tells the user's Ctrl-C from a ``KeyboardInterrupt`` a plug-in
+    raised itself. hazardhunt's command calls it when it starts, its worker processes too;
+    it leaves a SIGINT that is ignored so (the workers of a campaign's worker), and does
+    nothing outside the main thread."""
+    main = threading.current_thread() is threading.main_thread()
+    if main and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _on_ctrl_c)
+
+
+def is_users_interrupt() -> bool:
+    """Whether a ``KeyboardInterrupt`` just raised is the user's Ctrl-C: a SIGINT came, where
+    :func:`notice_ctrl_c` watches for it; never, where SIGINT is ignored (a campaign's worker
+    processes, whose Ctrl-C the campaign process handles); and, where neither (hazardhunt
+    used as a library), taken to be, as nothing tells."""
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is _on_ctrl_c:
+        return _ctrl_c_received
+    return handler is not signal.SIG_IGN
 
 
 def _interruptible(seconds: float, function: Callable[..., T], args: tuple[Any, ...]) -> T:

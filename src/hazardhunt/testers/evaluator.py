@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import reprlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -20,8 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hazardhunt.processes import die_with_parent
-from hazardhunt.sim.simulation import EpisodeResult, Simulation
+from hazardhunt.sim.simulation import EpisodeResult, Simulation, UnusableActionError
 from hazardhunt.spec.episode import EpisodeSummary
+from hazardhunt.sut.guard import notice_ctrl_c
 from hazardhunt.testers.spaces import DecisionSpace
 
 if TYPE_CHECKING:
@@ -40,6 +42,18 @@ class Plan:
     """How the decisions are read."""
     decisions: NDArray[np.float64]
     """Shape (up to ``horizon``, ``space.size``): the episode's decisions, in [-1, 1]."""
+
+
+def unusable_decisions(plan: Plan) -> str | None:
+    """What is wrong with ``plan``'s decisions, if they are not all finite numbers (the
+    actions they make would not be either); None if they are."""
+    try:
+        finite = bool(np.isfinite(np.asarray(plan.decisions, dtype=np.float64)).all())
+    except (TypeError, ValueError):
+        finite = False
+    if finite:
+        return None
+    return f"proposed decisions that are not all finite numbers ({reprlib.repr(plan.decisions)})"
 
 
 SimulationSource = Simulation | Callable[[], Simulation]
@@ -65,7 +79,15 @@ class EpisodeEvaluator:
         self._pool: ProcessPoolExecutor | None = None
 
     def evaluate(self, plans: Sequence[Plan]) -> list[EpisodeResult]:
-        """Play ``plans`` and record them, in order, as the run's next episodes."""
+        """Play ``plans`` and record them, in order, as the run's next episodes.
+
+        Raises:
+            UnusableActionError: A plan's decisions are not all finite numbers (none is
+                played).
+        """
+        unusable = next(filter(None, map(unusable_decisions, plans)), None)
+        if unusable is not None:
+            raise UnusableActionError(unusable)
         if self.workers <= 1 or len(plans) <= 1:
             simulation, keep = self.recorder.simulation, self.recorder.keep_trajectory
             results = [plan.space.play(simulation, plan.decisions, keep) for plan in plans]
@@ -115,6 +137,7 @@ def _start_worker(
     with SIGKILL leaves no worker behind)."""
     global _worker
     die_with_parent(parent_pid)
+    notice_ctrl_c()
     _worker = (source if isinstance(source, Simulation) else source(), keep)
 
 

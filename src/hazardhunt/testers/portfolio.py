@@ -71,13 +71,14 @@ from typing import Any, cast
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from hazardhunt.sim.simulation import EpisodeResult
+from hazardhunt.sim.simulation import EpisodeResult, UnusableActionError
 from hazardhunt.spec.failure_classes import MechanismClassifier
+from hazardhunt.sut.guard import is_plugin_fault
 from hazardhunt.sut.plugins import PluginError, build
 from hazardhunt.testers.base import Tester, TesterParameterError
 from hazardhunt.testers.boundary import BoundaryParams, BoundarySampler
 from hazardhunt.testers.cem import CrossEntropyParams, CrossEntropySampler
-from hazardhunt.testers.evaluator import Plan
+from hazardhunt.testers.evaluator import Plan, unusable_decisions
 from hazardhunt.testers.mirror import MirrorParams, MirrorSampler, failure_cell
 from hazardhunt.testers.novelty import FailureArchive
 from hazardhunt.testers.objective import ContactRule, violation_class
@@ -273,8 +274,14 @@ class PortfolioSampler:
             state = self._asking = self._choose(idle)
             try:
                 plans = state.sampler.ask()
-            except Exception as error:  # a user's sampler may raise anything
+            except BaseException as error:  # a user's sampler may raise anything, SystemExit too
+                if not is_plugin_fault(error):
+                    raise
                 self._drop(state, error)
+                continue
+            unusable = next(filter(None, map(unusable_decisions, plans)), None)
+            if unusable is not None:
+                self._drop(state, UnusableActionError(unusable))
                 continue
             if plans:
                 return plans
@@ -301,11 +308,13 @@ class PortfolioSampler:
         total = sum(state.weighted_episodes for state in active)
         return max(active, key=lambda state: state.value(total, self.params.optimism))
 
-    def _drop(self, state: _ArmState, error: Exception) -> None:
-        """Take an arm that raised out of the portfolio; the others share its budget."""
+    def _drop(self, state: _ArmState, error: BaseException) -> None:
+        """Take an arm that raised (or proposed decisions that cannot be played) out of the
+        portfolio; the others share its budget."""
         state.dropped = f"{type(error).__name__}: {error}"
+        did = error if isinstance(error, UnusableActionError) else "raised"
         warnings.warn(
-            f"portfolio arm {state.arm.name!r} raised and was dropped: {state.dropped}",
+            f"portfolio arm {state.arm.name!r} {did} and was dropped: {state.dropped}",
             RuntimeWarning,
             stacklevel=2,
         )
@@ -333,14 +342,18 @@ class PortfolioSampler:
         self._asking = None
         try:
             state.sampler.tell(plans, results)
-        except Exception as error:  # a user's sampler may raise anything
+        except BaseException as error:  # a user's sampler may raise anything, SystemExit too
+            if not is_plugin_fault(error):
+                raise
             self._drop(state, error)
         for other in self.arms:
             if other is state or other.dropped or not isinstance(other.sampler, Observer):
                 continue
             try:
                 other.sampler.observe(plans, results)
-            except Exception as error:  # a user's sampler may raise anything
+            except BaseException as error:  # a user's sampler may raise anything
+                if not is_plugin_fault(error):
+                    raise
                 self._drop(other, error)
 
     def _gain(self, state: _ArmState, result: EpisodeResult, episode: int) -> float:
