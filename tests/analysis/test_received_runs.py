@@ -1,0 +1,80 @@
+"""Runs received from someone else, made to match their checksums: trajectories that no floor
+holds, episodes numbered twice, names of megabytes, control characters and HTML in names, a
+``report`` that is a symbolic link. Each is named in one line or shown harmless, never a
+traceback, a hang or raw text on the terminal."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from hazardhunt.campaign.store import file_checksums
+from tests.helpers import hazardhunt
+
+ROOT = Path(__file__).parents[2]
+PURSUIT = "hazardhunt.sut.pursuit:PursuitController"
+
+
+@pytest.fixture(scope="module")
+def pursuit_run(tmp_path_factory):
+    """A finished run with a failure and its trajectory (a cheap controller, 6 episodes)."""
+    out = tmp_path_factory.mktemp("received") / "run"
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--tester", "random",
+        "--episodes", 6, "--out", out, "--controller", PURSUIT, cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert len(pd.read_parquet(out / "failures.parquet")) >= 1
+    return out
+
+
+def forged(run: Path, into: Path, **tables) -> Path:
+    """A copy of ``run`` in ``into`` whose tables ``tables`` (``failures=change``, with
+    ``trajectories`` for the stored trajectories) are changed by ``change(frame)``, its
+    checksums made anew: as whoever made it would send it."""
+    received = into / "received"
+    shutil.copytree(run, received)
+    for name, change in tables.items():
+        if name == "trajectories":
+            parts = sorted((received / "trajectories").glob("*.parquet"))
+            table = pd.concat([pd.read_parquet(part) for part in parts], ignore_index=True)
+            for part in parts:
+                part.unlink()
+            path = received / "trajectories" / "part-00000.parquet"
+        else:
+            path = received / f"{name}.parquet"
+            table = pd.read_parquet(path)
+        change(table).to_parquet(path, index=False)
+    summary = json.loads((received / "summary.json").read_text())
+    summary["checksums"] = file_checksums(received)
+    (received / "summary.json").write_text(json.dumps(summary))
+    return received
+
+
+@pytest.mark.parametrize(
+    ("value", "column"),
+    [(1e308, "human_x"), (float("nan"), "robot_y")],
+)
+def test_a_trajectory_no_floor_holds_is_named_damaged(pursuit_run, tmp_path, value, column):
+    received = forged(pursuit_run, tmp_path, trajectories=lambda t: t.assign(**{column: value}))
+    for command in (["report", received], ["export", received, "--out", tmp_path / "cases"]):
+        done = hazardhunt(*command)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.strip() == (
+            f"error: {received}: the run is damaged (trajectories/part-00000.parquet: {column} "
+            "holds a value that is not a finite number of at most 1e+06 in size); run it again"
+        )
+    assert not (tmp_path / "cases").exists()
+
+
+def test_episodes_all_numbered_0_are_named_damaged(pursuit_run, tmp_path):
+    received = forged(pursuit_run, tmp_path, episodes=lambda e: e.assign(episode=0))
+    done = hazardhunt("report", received)
+    assert done.returncode == 2
+    rows = len(pd.read_parquet(received / "episodes.parquet"))
+    assert done.stderr.strip() == (
+        f"error: {received}: the run is damaged (episodes.parquet: episode 0 has {rows} rows, "
+        "not one); run it again"
+    )
