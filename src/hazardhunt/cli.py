@@ -26,7 +26,7 @@ from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
-from hazardhunt.warning_lines import show_warnings_in_one_line
+from hazardhunt.warning_lines import printable, show_warnings_in_one_line
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 if TYPE_CHECKING:
@@ -1284,8 +1284,7 @@ INTERRUPTED = 130
 def shown(text: str) -> str:
     """Text read from a file someone else may have made, as the terminal shows it: its control
     characters (escape sequences) written out as ``\\x1b`` and its rich markup escaped."""
-    printable = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
-    return escape(printable)
+    return escape(printable(text))
 
 
 def _exit_with(message: str, code: int) -> NoReturn:

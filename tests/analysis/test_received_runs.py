@@ -30,10 +30,11 @@ def pursuit_run(tmp_path_factory):
     return out
 
 
-def forged(run: Path, into: Path, **tables) -> Path:
+def forged(run: Path, into: Path, summary_changes: dict | None = None, **tables) -> Path:
     """A copy of ``run`` in ``into`` whose tables ``tables`` (``failures=change``, with
-    ``trajectories`` for the stored trajectories) are changed by ``change(frame)``, its
-    checksums made anew: as whoever made it would send it."""
+    ``trajectories`` for the stored trajectories) are changed by ``change(frame)``, and whose
+    ``summary.json`` gets ``summary_changes``, its checksums made anew: as whoever made it
+    would send it."""
     received = into / "received"
     shutil.copytree(run, received)
     for name, change in tables.items():
@@ -48,6 +49,7 @@ def forged(run: Path, into: Path, **tables) -> Path:
             table = pd.read_parquet(path)
         change(table).to_parquet(path, index=False)
     summary = json.loads((received / "summary.json").read_text())
+    summary |= summary_changes or {}
     summary["checksums"] = file_checksums(received)
     (received / "summary.json").write_text(json.dumps(summary))
     return received
@@ -78,3 +80,44 @@ def test_episodes_all_numbered_0_are_named_damaged(pursuit_run, tmp_path):
         f"error: {received}: the run is damaged (episodes.parquet: episode 0 has {rows} rows, "
         "not one); run it again"
     )
+
+
+HOSTILE = "<script>alert(1)</script>\x1b[31m"
+"""Text a stranger's run may hold: HTML, and an escape sequence that turns a terminal red."""
+
+
+@pytest.fixture(scope="module")
+def hostile_report(pursuit_run, tmp_path_factory):
+    """``hazardhunt report`` of a received run whose failure's class is ``HOSTILE`` and 5 MB
+    more, its tester ``<b>me</b>``: the run's folder and what the command printed."""
+    received = forged(
+        pursuit_run,
+        tmp_path_factory.mktemp("hostile"),
+        summary_changes={"tester": "<b>me</b>"},
+        failures=lambda f: f.assign(**{"class": HOSTILE + "x" * 5_000_000}),
+    )
+    done = hazardhunt("report", received, timeout=120)
+    assert done.returncode == 0, done.stderr[:2000]
+    return received, done
+
+
+def test_a_class_name_of_megabytes_is_shortened_in_the_report(hostile_report):
+    received, _ = hostile_report
+    table = (received / "report" / "tables" / "failures_per_class.md").read_text()
+    (row,) = [line for line in table.splitlines() if "xxxx" in line]
+    assert 1000 <= len(row) < 1200
+    assert all(len(path.name) <= 130 for path in (received / "report" / "figures").iterdir())
+
+
+def test_control_characters_in_a_name_reach_no_warning_line(hostile_report):
+    _, done = hostile_report
+    assert "Glyph 27 (\\x1b) missing" in done.stderr  # written out, not sent to the terminal
+    assert "\x1b" not in done.stderr + done.stdout
+
+
+def test_html_in_names_is_text_in_the_markdown_tables(hostile_report):
+    received, _ = hostile_report
+    tables = {path.name: path.read_text() for path in (received / "report" / "tables").glob("*.md")}
+    assert not [name for name, text in tables.items() if "<script>" in text or "<b>" in text]
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;\\x1b[31m" in tables["failures_per_class.md"]
+    assert "&lt;b&gt;me&lt;/b&gt;" in tables["failures_per_run.md"]

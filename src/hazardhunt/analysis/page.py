@@ -9,6 +9,7 @@ built with :func:`markupsafe.escape` around every value it shows.
 from __future__ import annotations
 
 import base64
+import html
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -16,6 +17,8 @@ from typing import ClassVar
 import jinja2
 import pandas as pd
 from markupsafe import Markup
+
+from hazardhunt.warning_lines import printable
 
 
 @dataclass(frozen=True)
@@ -121,14 +124,22 @@ def render_page(
 
 
 def markdown_table(data: pd.DataFrame) -> str:
-    """A table in GitHub Markdown, numbers to four significant digits."""
-    header = "| " + " | ".join(str(c) for c in data.columns) + " |"
+    """A table in GitHub Markdown, numbers to four significant digits. Text is shown as text:
+    names from results (a tester's, a class's) may be anyone's, and ``<script>``, a ``|`` or
+    a line break in one neither runs, nor splits its cell, nor ends its row."""
+    header = "| " + " | ".join(_markdown_cell(str(c)) for c in data.columns) + " |"
     rule = "|" + "|".join("---" for _ in data.columns) + "|"
     lines = [header, rule]
     for row in data.itertuples(index=False):
         cells = [_number(v) if isinstance(v, float) else str(v) for v in row]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("| " + " | ".join(_markdown_cell(c) for c in cells) + " |")
     return "\n".join(lines)
+
+
+def _markdown_cell(text: str) -> str:
+    """``text`` as the text of one cell of a Markdown table: HTML escaped (``&lt;script&gt;``),
+    ``|`` escaped by a backslash, control characters and line breaks written out (``\\x1b``)."""
+    return html.escape(printable(text), quote=False).replace("|", "\\|")
 
 
 def _number(value: float) -> str:
