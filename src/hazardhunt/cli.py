@@ -700,10 +700,12 @@ def report(
     report covers the others, if any, and its verdict names them first; 2 when the directory
     holds no results (not a run or campaign, or no run has finished yet).
     """
+    from hazardhunt.analysis.page import check_report_folder
     from hazardhunt.analysis.report import write_report
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
 
+    check_report_folder(directory / "report")
     if is_estimate(directory):
         with _transient_bar(console) as progress:
             task = progress.add_task("report", total=None)

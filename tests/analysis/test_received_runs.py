@@ -121,3 +121,46 @@ def test_html_in_names_is_text_in_the_markdown_tables(hostile_report):
     assert not [name for name, text in tables.items() if "<script>" in text or "<b>" in text]
     assert "&lt;script&gt;alert(1)&lt;/script&gt;\\x1b[31m" in tables["failures_per_class.md"]
     assert "&lt;b&gt;me&lt;/b&gt;" in tables["failures_per_run.md"]
+
+
+def test_a_report_link_in_a_received_run_is_named_and_not_followed(pursuit_run, tmp_path):
+    received, elsewhere = tmp_path / "received", tmp_path / "elsewhere"
+    shutil.copytree(pursuit_run, received)
+    elsewhere.mkdir()
+    (received / "report").symlink_to(elsewhere)
+    done = hazardhunt("report", received)
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: {received / 'report'}: a symbolic link, where the report's own folder goes; a "
+        "report never writes through one: remove the link (nothing was written)"
+    )
+    assert not any(elsewhere.iterdir())
+
+
+def test_a_report_link_in_a_received_estimate_is_named(tmp_path):
+    estimate, elsewhere = tmp_path / "estimate", tmp_path / "elsewhere"
+    done = hazardhunt(
+        "estimate", "--scenario", "head-on", "--field", "none", "--method", "mc",
+        "--episodes", 100, "--batch-size", 50, "--out", estimate,
+        "--controller", "hazardhunt.benchmark.conservative:ConservativeController",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    elsewhere.mkdir()
+    (estimate / "report").symlink_to(elsewhere)
+    done = hazardhunt("report", estimate)
+    assert done.returncode == 2
+    assert done.stderr.strip().startswith(f"error: {estimate / 'report'}: a symbolic link")
+    assert not any(elsewhere.iterdir())
+
+
+def test_copy_to_an_out_that_is_a_link_is_named(pursuit_run, tmp_path):
+    out, elsewhere = tmp_path / "copy", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    out.symlink_to(elsewhere)
+    done = hazardhunt("copy", pursuit_run, "--out", out)
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"error: --out: {out} is a symbolic link; copy writes a folder of its own, never through "
+        "a link: name the folder itself, or another"
+    )
+    assert not any(elsewhere.iterdir())

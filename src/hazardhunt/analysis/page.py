@@ -18,6 +18,7 @@ import jinja2
 import pandas as pd
 from markupsafe import Markup
 
+from hazardhunt.errors import InputError
 from hazardhunt.warning_lines import printable
 
 
@@ -121,6 +122,16 @@ def render_page(
         sections=sections,
         facts=facts,
     )
+
+
+def check_report_folder(folder: Path) -> None:
+    """Raises InputError if the report's folder ``folder`` is a symbolic link: a report
+    replaces its own folder, and never writes through a link found in received results."""
+    if folder.is_symlink():
+        raise InputError(
+            f"{folder}: a symbolic link, where the report's own folder goes; a report never "
+            "writes through one: remove the link (nothing was written)"
+        )
 
 
 def markdown_table(data: pd.DataFrame) -> str:
