@@ -2,6 +2,7 @@
 files of their own, a requirement's name of any length gets a file name a file system takes,
 and an ``--out`` that holds results is refused before anything is written."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -82,3 +83,34 @@ def test_an_out_that_holds_results_is_refused(violating_run, tmp_path, holds):
         f"error: --out: {out} holds {article} {holds} ({marker}), not cases; choose another --out"
     )
     assert sorted(out.rglob("*")) == before
+
+
+CAMPAIGN = """
+scenarios = ["head-on"]
+fields = ["none"]
+testers = ["random"]
+seeds = [0, 1]
+episodes = 6
+
+[controller]
+path = "hazardhunt.sut.pursuit:PursuitController"
+"""
+"""Two runs of a cheap controller that each fail in the same episode."""
+
+
+def test_runs_whose_ids_make_one_file_name_get_a_case_each(tmp_path):
+    (tmp_path / "campaign.toml").write_text(CAMPAIGN)
+    received = tmp_path / "received"
+    done = hazardhunt("campaign", tmp_path / "campaign.toml", "--out", received, "--workers", 1)
+    assert done.returncode == 0, done.stderr
+    runs = sorted((received / "runs").iterdir())
+    for run, run_id in zip(runs, ["..", ""], strict=True):  # as a stranger's summaries say
+        summary = json.loads((run / "summary.json").read_text())
+        (run / "summary.json").write_text(json.dumps(summary | {"run_id": run_id}))
+    failures = sum(json.loads((run / "summary.json").read_text())["failures"] for run in runs)
+    cases = tmp_path / "cases"
+    done = hazardhunt("export", received, "--out", cases, "--all")
+    assert done.returncode == 0, done.stderr
+    files = sorted(cases.glob("*.toml"))
+    assert len(files) == failures >= 2
+    assert f"{failures} cases written to {cases}" in done.stdout
