@@ -86,6 +86,53 @@ HOSTILE = "<script>alert(1)</script>\x1b[31m"
 """Text a stranger's run may hold: HTML, and an escape sequence that turns a terminal red."""
 
 
+def test_names_of_megabytes_are_read_shortened_with_a_digest(pursuit_run, tmp_path):
+    from hazardhunt.analysis.results import load_results
+
+    long_class, long_tester = HOSTILE + "x" * 5_000_000, "t" * 2_000_000
+    received = forged(
+        pursuit_run,
+        tmp_path,
+        summary_changes={"tester": long_tester},
+        failures=lambda f: f.assign(**{"class": long_class}),
+    )
+    results = load_results(received)
+    (shown,) = set(results.failures["class"])
+    assert len(shown) == 1000
+    assert shown.startswith(HOSTILE + "xxx")
+    assert shown[-13] == "…"  # then 12 hex digits of the whole name's digest
+    assert {len(name) for name in results.runs["tester"]} == {1000}
+    assert set(results.episodes["tester"]) == set(results.runs["tester"])
+
+
+def test_a_warning_that_quotes_a_received_file_writes_its_control_characters_out():
+    import warnings
+
+    import hazardhunt
+    from hazardhunt.warning_lines import show_warnings_in_one_line
+
+    own, others = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = lambda message, *rest: others.append(str(message))
+        show_warnings_in_one_line(own.append)
+        warnings.warn_explicit(f"class {HOSTILE}", UserWarning, hazardhunt.__file__, 1)
+        warnings.warn_explicit("Glyph 27 (\x1b) missing", UserWarning, "matplotlib/text.py", 1)
+    assert own == ["class <script>alert(1)</script>\\x1b[31m"]
+    assert others == ["Glyph 27 (\\x1b) missing"]
+
+
+def test_a_markdown_table_holds_names_as_text():
+    from hazardhunt.analysis.page import markdown_table
+
+    table = pd.DataFrame({"<b>tester</b>": [HOSTILE + "|\nnext"], "failures": [1.0]})
+    assert markdown_table(table).splitlines() == [
+        "| &lt;b&gt;tester&lt;/b&gt; | failures |",
+        "|---|---|",
+        "| &lt;script&gt;alert(1)&lt;/script&gt;\\x1b[31m\\|\\nnext | 1 |",
+    ]
+
+
 @pytest.fixture(scope="module")
 def hostile_report(pursuit_run, tmp_path_factory):
     """``hazardhunt report`` of a received run whose failure's class is ``HOSTILE`` and 5 MB
@@ -101,6 +148,7 @@ def hostile_report(pursuit_run, tmp_path_factory):
     return received, done
 
 
+@pytest.mark.slow  # a report: 20-40 s
 def test_a_class_name_of_megabytes_is_shortened_in_the_report(hostile_report):
     received, _ = hostile_report
     table = (received / "report" / "tables" / "failures_per_class.md").read_text()
@@ -109,12 +157,14 @@ def test_a_class_name_of_megabytes_is_shortened_in_the_report(hostile_report):
     assert all(len(path.name) <= 130 for path in (received / "report" / "figures").iterdir())
 
 
+@pytest.mark.slow  # a report: 20-40 s
 def test_control_characters_in_a_name_reach_no_warning_line(hostile_report):
     _, done = hostile_report
     assert "Glyph 27 (\\x1b) missing" in done.stderr  # written out, not sent to the terminal
     assert "\x1b" not in done.stderr + done.stdout
 
 
+@pytest.mark.slow  # a report: 20-40 s
 def test_html_in_names_is_text_in_the_markdown_tables(hostile_report):
     received, _ = hostile_report
     tables = {path.name: path.read_text() for path in (received / "report" / "tables").glob("*.md")}
