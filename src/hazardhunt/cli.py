@@ -27,7 +27,7 @@ from hazardhunt.errors import HazardhuntError
 from hazardhunt.sut.guard import notice_ctrl_c
 from hazardhunt.testers.registry import TESTERS, is_import_path
 from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
-from hazardhunt.warning_lines import show_warnings_in_one_line
+from hazardhunt.warning_lines import printable, show_warnings_in_one_line
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
 if TYPE_CHECKING:
@@ -701,10 +701,12 @@ def report(
     report covers the others, if any, and its verdict names them first; 2 when the directory
     holds no results (not a run or campaign, or no run has finished yet).
     """
+    from hazardhunt.analysis.page import check_report_folder
     from hazardhunt.analysis.report import write_report
     from hazardhunt.analysis.risk_report import is_estimate, write_estimate_report
     from hazardhunt.campaign.plugins import make_classifier
 
+    check_report_folder(directory / "report")
     if is_estimate(directory):
         with _transient_bar(console) as progress:
             task = progress.add_task("report", total=None)
@@ -1287,8 +1289,7 @@ INTERRUPTED = 130
 def shown(text: str) -> str:
     """Text read from a file someone else may have made, as the terminal shows it: its control
     characters (escape sequences) written out as ``\\x1b`` and its rich markup escaped."""
-    printable = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
-    return escape(printable)
+    return escape(printable(text))
 
 
 def _exit_with(message: str, code: int) -> NoReturn:

@@ -5,6 +5,7 @@ refuses is one line in the file's own words (:func:`format_validation_error`).""
 from __future__ import annotations
 
 import difflib
+import hashlib
 import re
 import sys
 import types
@@ -38,6 +39,15 @@ def loads_toml(text: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except RecursionError:
         raise TomlTooDeepError("arrays or tables nested too deeply") from None
+
+
+def shortened(text: str, limit: int, joiner: str = "…") -> str:
+    """``text`` if it has at most ``limit`` characters, else its start, ``joiner`` and 12 hex
+    digits of its SHA-256, ``limit`` characters in all: texts that differ stay apart."""
+    if len(text) <= limit:
+        return text
+    digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+    return text[: max(limit - len(joiner) - len(digest), 0)] + joiner + digest
 
 
 _KINDS = {

@@ -5,7 +5,9 @@ warning hazardhunt gives on purpose (a plug-in of an earlier protocol, an arm of
 dropped) that is noise around one sentence. The command line shows them as one line; a
 campaign's worker processes send theirs to the campaign process, which shows them the same way
 after the id of the run they belong to (above its progress bars, where a worker's own writes
-would break them). Warnings of other libraries keep Python's form.
+would break them). Warnings of other libraries keep Python's form. Either kind may quote a
+file someone else made (a class name matplotlib cannot draw): its control characters are
+written out (``\\x1b``), never sent to the terminal.
 """
 
 from __future__ import annotations
@@ -19,9 +21,15 @@ from typing import TextIO
 _PACKAGE = Path(__file__).resolve().parent
 
 
+def printable(text: str) -> str:
+    """``text`` with every character the terminal would not print as itself (escape
+    sequences, line breaks) written out as Python writes it in a string: ``\\x1b``, ``\\n``."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+
+
 def print_warning(text: str) -> None:
     """Show one warning's text as ``warning: TEXT`` on stderr."""
-    print(f"warning: {text}", file=sys.stderr, flush=True)
+    print(f"warning: {printable(text)}", file=sys.stderr, flush=True)
 
 
 def show_warnings_in_one_line(
@@ -46,9 +54,9 @@ def show_warnings_in_one_line(
         line: str | None = None,
     ) -> None:
         if not Path(filename).resolve().is_relative_to(_PACKAGE):
-            show_other(message, category, filename, lineno, file, line)
+            show_other(printable(str(message)), category, filename, lineno, file, line)
             return
-        text = f"{prefix}{message}"
+        text = printable(f"{prefix}{message}")
         if text not in shown:
             shown.add(text)
             write(text)

@@ -9,6 +9,7 @@ built with :func:`markupsafe.escape` around every value it shows.
 from __future__ import annotations
 
 import base64
+import html
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -16,6 +17,9 @@ from typing import ClassVar
 import jinja2
 import pandas as pd
 from markupsafe import Markup
+
+from hazardhunt.errors import InputError
+from hazardhunt.warning_lines import printable
 
 
 @dataclass(frozen=True)
@@ -120,15 +124,33 @@ def render_page(
     )
 
 
+def check_report_folder(folder: Path) -> None:
+    """Raises InputError if the report's folder ``folder`` is a symbolic link: a report
+    replaces its own folder, and never writes through a link found in received results."""
+    if folder.is_symlink():
+        raise InputError(
+            f"{folder}: a symbolic link, where the report's own folder goes; a report never "
+            "writes through one: remove the link (nothing was written)"
+        )
+
+
 def markdown_table(data: pd.DataFrame) -> str:
-    """A table in GitHub Markdown, numbers to four significant digits."""
-    header = "| " + " | ".join(str(c) for c in data.columns) + " |"
+    """A table in GitHub Markdown, numbers to four significant digits. Text is shown as text:
+    names from results (a tester's, a class's) may be anyone's, and ``<script>``, a ``|`` or
+    a line break in one neither runs, nor splits its cell, nor ends its row."""
+    header = "| " + " | ".join(_markdown_cell(str(c)) for c in data.columns) + " |"
     rule = "|" + "|".join("---" for _ in data.columns) + "|"
     lines = [header, rule]
     for row in data.itertuples(index=False):
         cells = [_number(v) if isinstance(v, float) else str(v) for v in row]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("| " + " | ".join(_markdown_cell(c) for c in cells) + " |")
     return "\n".join(lines)
+
+
+def _markdown_cell(text: str) -> str:
+    """``text`` as the text of one cell of a Markdown table: HTML escaped (``&lt;script&gt;``),
+    ``|`` escaped by a backslash, control characters and line breaks written out (``\\x1b``)."""
+    return html.escape(printable(text), quote=False).replace("|", "\\|")
 
 
 def _number(value: float) -> str:

@@ -34,7 +34,15 @@ from markupsafe import Markup, escape
 
 import hazardhunt
 from hazardhunt.analysis import diversity, figures, page, tables, verdict
-from hazardhunt.analysis.page import Commands, Heading, Prose, Section, Text, markdown_table
+from hazardhunt.analysis.page import (
+    Commands,
+    Heading,
+    Prose,
+    Section,
+    Text,
+    check_report_folder,
+    markdown_table,
+)
 from hazardhunt.analysis.results import Results, load_results
 from hazardhunt.analysis.study import STUDY_BASELINE, STUDY_REWARDS
 from hazardhunt.campaign.config import file_name
@@ -138,9 +146,10 @@ def write_report(
         RunsFailed: When no run of the campaign is complete and some failed.
     """
     tell = progress if progress is not None else (lambda step: None)
+    final = directory / "report"
+    check_report_folder(final)  # before the run's check, which calls any link damage
     tell("reading results")
     results, scenario_files = _scenarios_shown(load_results(directory, classifier))
-    final = directory / "report"
     _remove_leftovers(directory)
     scratch = directory / f".report-{os.getpid()}.partial"
     shutil.rmtree(scratch, ignore_errors=True)

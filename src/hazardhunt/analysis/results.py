@@ -26,10 +26,19 @@ from hazardhunt.spec.failure_classes import (
 )
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.registry import sort_testers
-from hazardhunt.textfiles import format_validation_error
+from hazardhunt.textfiles import format_validation_error, shortened
 
 RUN_KEYS = ("run_id", "scenario", "field", "tester", "seed")
 """Columns that name a run in every table."""
+
+TEXT_LIMIT = 1000
+"""The most characters of a text read from the results (a class's, a tester's, a
+requirement's name): longer ones are shortened (:func:`~hazardhunt.textfiles.shortened`, a
+digest keeps them apart), since a received run's name of megabytes takes the figures minutes
+to draw."""
+WHOLE_TEXT = ("formula", "directory")
+"""Columns read whole: a requirement's formula (it replays the requirement; its cost is
+bounded when parsed) and where a run is."""
 
 
 class ResultsError(InputError):
@@ -146,9 +155,11 @@ def load_results_of(
     runs["directory"] = [str(path) for path in run_directories]
     runs["reward"] = [config.get("reward") for config in configs]
     runs["blas"] = [config.get("blas") for config in configs]  # absent before 0.2
-    runs = in_tester_order(runs, ("scenario", "field"), ("seed",))
+    runs = _capped(in_tester_order(runs, ("scenario", "field"), ("seed",)))
+    if "requirements" in runs:  # each requirement's counts, by its name
+        runs["requirements"] = runs["requirements"].map(_capped_keys)
     tables = {
-        name: _stacked(run_directories, summaries, f"{name}.parquet")
+        name: _capped(_stacked(run_directories, summaries, f"{name}.parquet"))
         for name in ("episodes", "failures", "loitering", "violations")
     }
     _judge_tested_only(tables)
@@ -279,6 +290,36 @@ def _stacked(
     if not parts:
         return pd.DataFrame(columns=list(RUN_KEYS))
     return pd.concat(parts, ignore_index=True)
+
+
+def _capped(table: pd.DataFrame) -> pd.DataFrame:
+    """``table`` with each text longer than :data:`TEXT_LIMIT` shortened, in its cells and in
+    the names of its requirements' columns, but for :data:`WHOLE_TEXT`."""
+    table = table.rename(
+        columns={
+            column: REQUIREMENT_COLUMN + shortened(column[len(REQUIREMENT_COLUMN) :], TEXT_LIMIT)
+            for column in table.columns
+            if str(column).startswith(REQUIREMENT_COLUMN)
+        }
+    )
+    for column in table.columns:
+        values = table[column]
+        if column in WHOLE_TEXT or not (
+            pd.api.types.is_object_dtype(values) or pd.api.types.is_string_dtype(values)
+        ):
+            continue
+        if any(isinstance(value, str) and len(value) > TEXT_LIMIT for value in values):
+            table[column] = values.map(
+                lambda value: shortened(value, TEXT_LIMIT) if isinstance(value, str) else value
+            )
+    return table
+
+
+def _capped_keys(counts: Any) -> Any:
+    """A table of ``counts`` by name with its names shortened as :func:`_capped` does."""
+    if not isinstance(counts, dict):
+        return counts
+    return {shortened(str(name), TEXT_LIMIT): count for name, count in counts.items()}
 
 
 def _judge_tested_only(tables: dict[str, pd.DataFrame]) -> None:

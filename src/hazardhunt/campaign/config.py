@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import functools
+import hashlib
 import itertools
 import os
 import re
@@ -290,16 +291,28 @@ def scenario_field(cls: type, value: str, info: ValidationInfo) -> str:
     return value
 
 
-def file_name(name: str) -> str:
+FILE_NAME_LIMIT = 120
+"""The most characters :func:`file_name` gives: a file system takes 255 bytes in one name, and
+a prefix or suffix (``class_``, ``.toml``) must fit beside it."""
+
+
+def file_name(name: str, limit: int | None = FILE_NAME_LIMIT) -> str:
     """``name`` as one path component that stays where it is put: every run of characters
-    but letters, digits, ``_``, ``.`` and ``-`` becomes ``_``, and leading dots go."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).lstrip(".") or "_"
+    but letters, digits, ``_``, ``.`` and ``-`` becomes ``_``, and leading dots go. A name
+    longer than ``limit`` (None: no limit) keeps its start and ends with ``-`` and 12 hex digits
+    of the SHA-256 of ``name``, so that long names that differ stay apart."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).lstrip(".") or "_"
+    if limit is None or len(safe) <= limit:
+        return safe
+    digest = hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+    return f"{safe[: limit - len(digest) - 1]}-{digest}"
 
 
 def run_id_of(scenario: str, field: str, tester: str, seed: int) -> str:
     """The name of a run's directory: its scenario's name, field, tester and seed, each made a
     safe file name (see :func:`file_name`)."""
-    parts = (file_name(Path(scenario).stem), file_name(field), file_name(tester))
+    # Not shortened: a campaign's run folders keep the names earlier versions gave them.
+    parts = (file_name(Path(scenario).stem, None), file_name(field, None), file_name(tester, None))
     return "__".join(parts) + f"__seed{seed}"
 
 

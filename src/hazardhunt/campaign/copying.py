@@ -62,8 +62,14 @@ def copy_results(source: Path, destination: Path, leave_out: tuple[str, ...] = L
 
     Raises:
         ConfigError: ``source`` is neither a run nor a campaign directory, a run that has not
-            finished or is damaged, or ``destination`` holds other results.
+            finished or is damaged, or ``destination`` holds other results or is a symbolic
+            link.
     """
+    if destination.is_symlink():  # a run's copy replaces the folder, never what a link names
+        raise ConfigError(
+            f"--out: {destination} is a symbolic link; copy writes a folder of its own, never "
+            "through a link: name the folder itself, or another"
+        )
     if destination.resolve().is_relative_to(source.resolve()):
         raise ConfigError(f"{destination}: inside the results it would copy; name another folder")
     if (source / "campaign.json").is_file():

@@ -19,6 +19,22 @@ FINITE_COLUMNS = {"failures.parquet": ("sim_time", "max_risk")}
 """Columns whose every value is a finite number."""
 TEXT_COLUMNS = {"episodes.parquet": ("outcome",), "failures.parquet": ("outcome", "class")}
 """Columns whose every value is text."""
+TRAJECTORY_NUMBERS = (
+    "time",
+    "human_x",
+    "human_y",
+    "human_heading",
+    "robot_x",
+    "robot_y",
+    "robot_heading",
+    "robot_speed",
+    "robot_yaw_rate",
+    "clearance",
+)
+"""The columns of a run's trajectories that the report draws and clusters failures on."""
+TRAJECTORY_LIMIT = 1e6
+"""The largest size of a trajectory's value (m, rad, m/s, rad/s or s): no floor, robot or
+episode comes near it, and a position beyond it no figure can draw."""
 
 
 def table_problem(directory: Path) -> str | None:
@@ -51,6 +67,32 @@ def table_problem(directory: Path) -> str | None:
                 f"failures.parquet: episode {unplayed[0].as_py()} is not an episode of "
                 "episodes.parquet"
             )
+    return _trajectory_problem(directory)
+
+
+def _trajectory_problem(directory: Path) -> str | None:
+    """What is wrong with the numbers of the run's stored trajectories, if anything."""
+    for path in sorted((directory / "trajectories").glob("*.parquet")):
+        name = path.relative_to(directory).as_posix()
+        try:
+            present = set(pq.read_schema(path).names)
+            columns = [column for column in TRAJECTORY_NUMBERS if column in present]
+            table = pq.read_table(path, columns=columns)
+        except (OSError, ValueError) as error:
+            return f"{name} cannot be read ({error})"
+        if table.num_rows == 0:
+            continue
+        for column in columns:
+            values = table[column]
+            if not (pa.types.is_integer(values.type) or pa.types.is_floating(values.type)):
+                return f"{name}: {column} holds a value that is not a number"
+            sizes = pc.abs(pc.cast(values, pa.float64()))
+            within = pc.less_equal(sizes, TRAJECTORY_LIMIT)  # False for NaN, null for null
+            if values.null_count or not pc.all(within).as_py():
+                return (
+                    f"{name}: {column} holds a value that is not a finite number of at most "
+                    f"{TRAJECTORY_LIMIT:g} in size"
+                )
     return None
 
 
@@ -75,4 +117,9 @@ def _values_problem(name: str, table: pa.Table) -> str | None:
         or pc.min(episodes).as_py() < 0
     ):
         return f"{name}: episode holds a value that is not a whole number from 0"
+    counts = pc.value_counts(episodes)
+    repeated = pc.filter(counts, pc.greater(counts.field("counts"), 1))
+    if len(repeated):
+        first = repeated[0].as_py()
+        return f"{name}: episode {first['values']} has {first['counts']} rows, not one"
     return None

@@ -13,7 +13,7 @@ import tomli_w
 import hazardhunt
 from hazardhunt.analysis.results import load_results
 from hazardhunt.analysis.tables import representatives
-from hazardhunt.campaign.config import check_output_location, file_name
+from hazardhunt.campaign.config import ConfigError, check_output_location, file_name
 from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.scenario_record import played_scenario_data
@@ -42,11 +42,14 @@ def export_cases(
             run recorded (read as data, not imported).
 
     Returns:
-        The case files written, in a stable order.
+        The case files written, in a stable order, each once: cases whose names would be one
+        file name (``a:b`` and ``a_b``, run ids that differ only in characters a file name
+        cannot hold) get ``-2``, ``-3`` ... after the first.
 
     Raises:
         PluginError: ``classifier`` does not load.
-        ConfigError: ``out`` cannot be made a folder or written in (nothing was written).
+        ConfigError: ``out`` cannot be made a folder or written in, or holds a run, campaign or
+            estimate (nothing was written).
     """
     results = load_results(directory, None if classifier is None else make_classifier(classifier))
     failures = results.failures
@@ -62,8 +65,10 @@ def export_cases(
         worst = violations.sort_values(["robustness", "run_id", "episode"], kind="stable")
         violations = worst.drop_duplicates(["scenario", "field", "requirement", "signals"])
     check_output_location(out)
+    _check_holds_no_results(out)
     out.mkdir(parents=True, exist_ok=True)
-    written = []
+    written: list[Path] = []
+    taken: set[str] = set()
     configs: dict[str, Any] = {}
 
     def config_of(run_id: str) -> Any:
@@ -77,10 +82,39 @@ def export_cases(
     for _, row in chosen.sort_values(["run_id", "episode"]).iterrows():
         config, scenario = config_of(str(row["run_id"]))
         case = _case(row, config, scenario, classifier or config.classifier)
-        written.append(_write_case(out, case))
+        written.append(_write_case(out, _named_apart(case, taken)))
     for _, row in violations.sort_values(["run_id", "episode", "requirement"]).iterrows():
-        written.append(_write_case(out, _violation_case(row, *config_of(str(row["run_id"])))))
+        case = _violation_case(row, *config_of(str(row["run_id"])))
+        written.append(_write_case(out, _named_apart(case, taken)))
     return written
+
+
+RESULT_FILES = {"campaign.json": "a campaign", "estimate.json": "an estimate", "config.json": ""}
+"""Files that mark a folder as results (a run's or estimate's ``config.json``), not cases."""
+
+
+def _check_holds_no_results(out: Path) -> None:
+    """Raises ConfigError if ``out`` is a run, campaign or estimate directory: cases written
+    there would mix with its files (as every other command refuses such an ``--out``)."""
+    for name, kind in RESULT_FILES.items():
+        if (out / name).is_file():
+            if not kind:
+                kind = "an estimate" if (out / "batches").is_dir() else "a run"
+            raise ConfigError(
+                f"--out: {out} holds {kind} ({name}), not cases; choose another --out"
+            )
+
+
+def _named_apart(case: dict[str, Any], taken: set[str]) -> dict[str, Any]:
+    """``case`` with a name no case written before it has (``taken``, which gets it): the
+    first of names that are one file name keeps it, the next get ``-2``, ``-3`` ... (compared
+    without case, as some file systems do)."""
+    name, number = case["name"], 1
+    while name.casefold() in taken:
+        number += 1
+        name = f"{case['name']}-{number}"
+    taken.add(name.casefold())
+    return {**case, "name": name}
 
 
 def _write_case(out: Path, case: dict[str, Any]) -> Path:
