@@ -5,7 +5,8 @@ It follows the route on ``/plan`` at cruise speed by steering towards the route 
 ``lookahead`` metres ahead, and ignores the human: hazardhunt's in-process
 ``hazardhunt.sut.pursuit:PursuitController`` in ROS 2's terms, plain rclpy and standard messages.
 
-Two ways of running, the parameter ``mode``:
+A new ``/plan`` starts an episode; so does a call of its ``reset`` service
+(``std_srvs/srv/Empty``). Two ways of running, the parameter ``mode``:
 
 - ``answer`` (default): one ``/cmd_vel`` for each ``/odom`` message, computed from it;
 - ``timer``: a timer on simulated time (``use_sim_time``) every ``period`` s publishes a command
@@ -28,6 +29,7 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_srvs.srv import Empty
 
 
 class Polyline:
@@ -97,6 +99,7 @@ class PurePursuit(Node):
         self.commands = self.create_publisher(Twist, "cmd_vel", 10)
         self.create_subscription(Path, "plan", self.on_plan, latched)
         self.create_subscription(Odometry, "odom", self.on_odometry, 10)
+        self.create_service(Empty, "reset", self.on_reset)
         if mode == "timer":
             self.create_timer(self.declare_parameter("period", 0.2).value, self.on_timer)
         elif mode != "answer":
@@ -108,6 +111,12 @@ class PurePursuit(Node):
         points = [(pose.pose.position.x, pose.pose.position.y) for pose in path.poses]
         self.route = Polyline(np.array(points, dtype=np.float64))
         self.progress = None
+
+    def on_reset(self, request: Empty.Request, response: Empty.Response) -> Empty.Response:
+        """A new episode (hazardhunt's ``reset = "service"``): forget where the robot was."""
+        self.progress = None
+        self.odometry = None
+        return response
 
     def on_odometry(self, odometry: Odometry) -> None:
         self.odometry = odometry

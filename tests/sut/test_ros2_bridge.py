@@ -90,6 +90,18 @@ def test_the_answering_node_plays_the_in_process_controllers_episodes_exactly():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("reset", ["service", "restart"])
+def test_a_node_reset_by_its_service_or_started_anew_per_episode_plays_the_same_episodes(reset):
+    actions = random_actions(5, 3)
+    bridge = Ros2Controller(command=node_command(PURSUIT_NODE), reset=reset)
+    try:
+        through_ros = played(bridge, actions)
+    finally:
+        bridge.close()
+    assert through_ros == played(PursuitController(), actions)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [3, 4])
 def test_a_run_through_the_bridge_records_the_in_process_run(tmp_path, seed):
     common = ["run", "--scenario", "crossing", "--field", "none", "--tester", "random",
@@ -220,3 +232,23 @@ def test_a_stopped_campaign_with_two_workers_leaves_no_node_and_no_shared_memory
         time.sleep(0.2)
     assert node_processes(str(PURSUIT_NODE)) == []
     assert shared_memory() - before == set()
+
+
+@pytest.mark.slow
+def test_a_failure_found_through_the_bridge_replays_through_it_once_named_again(tmp_path):
+    out = tmp_path / "run"
+    command = f"command={json.dumps(node_command(PURSUIT_NODE))}"
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--field", "none", "--tester", "random",
+        "--episodes", 25, "--seed", 2, "--out", out, "--controller", "ros2",
+        "--controller-param", command,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    episode = int(pd.read_parquet(out / "failures.parquet")["episode"].iloc[0])
+    refused = hazardhunt("replay", out, "--episode", episode)
+    assert refused.returncode == 2
+    assert "names the plug-in 'ros2'" in refused.stderr
+    replayed = hazardhunt("replay", out, "--episode", episode, "--controller", "ros2")
+    assert replayed.returncode == 0, replayed.stderr
+    assert "pure_pursuit_node.py" in replayed.stderr  # the command it starts is shown first
+    assert "reproduced" in replayed.stdout
