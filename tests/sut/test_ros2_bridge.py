@@ -136,6 +136,24 @@ def test_a_node_that_never_answers_is_a_one_line_error_before_anything_is_writte
     assert not out.exists()
 
 
+def test_a_node_that_publishes_commands_of_another_type_is_a_one_line_error(tmp_path):
+    out = tmp_path / "run"
+    command = f"command={json.dumps(node_command(TEST_NODES / 'stamped_node.py'))}"
+    done = hazardhunt(
+        "run", "--scenario", "crossing", "--episodes", 3, "--out", out,
+        "--controller", "ros2", "--controller-param", command,
+    )  # fmt: skip
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert lines[0].startswith("error: controller 'ros2': reset() raised RuntimeError: ")
+    assert lines[0].endswith(
+        "publishes /cmd_vel as geometry_msgs/msg/TwistStamped, not geometry_msgs/msg/Twist (on a "
+        "trial episode before the run; nothing was run)"
+    )
+    assert not out.exists()
+
+
 def test_a_node_that_never_answers_makes_each_episode_a_sut_error():
     bridge = Ros2Controller(command=node_command(TEST_NODES / "silent_node.py"), timeout=0.2)
     try:

@@ -164,6 +164,7 @@ class Ros2Controller:
         assert self._session is not None
         assert self._session.ros is not None
         ros = self._session.ros
+        self._session.lease.touch()
         self._restart = False
         if floor is not self._floor:
             self._floor, self._edges = floor, floor_edges(floor)

@@ -109,6 +109,15 @@ class BridgeNode:
             m["Twist"], topics["cmd_vel"], self._on_command, stream
         )
         self.topics = topics
+        self.types = {
+            role: _type_name(m[name])
+            for role, name in (
+                ("clock", "Clock"), ("odom", "Odometry"), ("scan", "LaserScan"),
+                ("human", "Odometry"), ("plan", "Path"), ("goal", "PoseStamped"),
+                ("map", "OccupancyGrid"), ("cmd_vel", "Twist"),
+            )
+        }  # fmt: skip
+        """The message type of each role's topic, as ROS names it (``geometry_msgs/msg/Twist``)."""
         self._received: list[tuple[float, float]] = []
 
     def close(self) -> None:
@@ -123,17 +132,37 @@ class BridgeNode:
         """Until the user's nodes publish ``/cmd_vel`` and take odometry (up to ``seconds``).
 
         Raises:
-            RuntimeError: They did not in time, or one exited.
+            RuntimeError: They did not in time, one exited, or one uses a topic of the bridge's
+                with another message type.
         """
         deadline = time.monotonic() + seconds
         while not (self.commands_matched() and self.odom.get_subscription_count() > 0):
             check()
+            self._check_types()
             if time.monotonic() > deadline:
                 raise RuntimeError(
                     f"no node subscribed to {self.topics['odom']} and published "
                     f"{self.topics['cmd_vel']} within {seconds:g} s (startup_timeout)"
                 )
             self.executor.spin_once(timeout_sec=0.05)
+        self._check_types()
+
+    def _check_types(self) -> None:
+        """Raises RuntimeError if a node publishes or subscribes to one of the bridge's topics
+        with a message type other than the bridge's (the two would never hear each other)."""
+        for role, message_type in self.types.items():
+            topic = self.topics[role]
+            if role == "cmd_vel":
+                endpoints, verb = self.node.get_publishers_info_by_topic(topic), "publishes"
+            else:
+                endpoints, verb = self.node.get_subscriptions_info_by_topic(topic), "subscribes to"
+            for endpoint in endpoints:
+                if endpoint.topic_type != message_type:
+                    known = not endpoint.node_name.startswith("_NODE_NAME_UNKNOWN")
+                    node = f"node {endpoint.node_name!r}" if known else "a node"
+                    raise RuntimeError(
+                        f"{node} {verb} {topic} as {endpoint.topic_type}, not {message_type}"
+                    )
 
     def commands_matched(self) -> bool:
         return bool(self.node.count_publishers(self.topics["cmd_vel"]) > 0)
@@ -281,3 +310,8 @@ class BridgeNode:
                 self.executor.spin_once(timeout_sec=0.05)
         finally:
             self.node.destroy_client(client)
+
+
+def _type_name(message_class: type) -> str:
+    """A message class's type as ROS names it: ``geometry_msgs/msg/Twist``."""
+    return f"{message_class.__module__.split('.')[0]}/msg/{message_class.__name__}"
