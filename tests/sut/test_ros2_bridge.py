@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from hazardhunt.campaign.config import ConfigError, load_campaign
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.pursuit import PursuitController
 from tests.helpers import hazardhunt, run_tables
@@ -227,6 +228,33 @@ def ros2_campaign(folder: Path, episodes: int) -> Path:
         f"params = {{ command = {json.dumps(node_command(PURSUIT_NODE))} }}\n"
     )
     return path
+
+
+@pytest.mark.parametrize(
+    ("params", "problem"),
+    [
+        ('{ command = "my_node", timout = 2.0 }', "ros2: does not take these parameters: got an "
+         "unexpected keyword argument 'timout'"),
+        ('{ command = "my_node", reset = "reboot" }', "ros2: reset must be 'messages', 'service' "
+         "or 'restart', not 'reboot'"),
+        ('{ command = "my_node", topics = { odometry = "/odom" } }', "ros2: topics: unknown role "
+         "'odometry' (roles: clock, odom, scan, human, plan, goal, map, cmd_vel)"),
+        ("{ timeout = 2.0 }", "ros2: does not take these parameters: missing a required argument: "
+         "'command'"),
+    ],
+)  # fmt: skip
+def test_a_campaign_file_naming_ros2_with_bad_parameters_is_one_line_naming_it(
+    tmp_path, params, problem
+):
+    path = tmp_path / "campaign.toml"
+    path.write_text(
+        'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [0]\n'
+        f'episodes = 2\n\n[controller]\npath = "ros2"\nparams = {params}\n'
+    )
+    with pytest.raises(ConfigError) as raised:
+        load_campaign(path)
+    assert str(raised.value) == f"{path}: controller: {problem}"
+    assert node_processes(str(tmp_path)) == []
 
 
 @pytest.mark.slow
