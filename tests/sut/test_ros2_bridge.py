@@ -90,6 +90,17 @@ def test_the_answering_node_plays_the_in_process_controllers_episodes_exactly():
     assert through_ros == in_process
 
 
+def test_simulated_time_never_runs_backwards_in_a_nodes_life():
+    bridge = Ros2Controller(command=node_command(TEST_NODES / "clock_checking_node.py"))
+    try:
+        simulation = Simulation.build("crossing", "none", controller=bridge)
+        outcomes = [simulation.simulate(a).outcome for a in random_actions(7, 3)]
+    finally:
+        bridge.close()
+    assert "sut_error" not in outcomes
+    assert None not in outcomes  # each episode ended (goal, failure, ...), three in one life
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("reset", ["service", "restart"])
 def test_a_node_reset_by_its_service_or_started_anew_per_episode_plays_the_same_episodes(reset):
