@@ -208,7 +208,10 @@ def _simulate_and_draw(
 
 ControllerOption = Annotated[
     str | None,
-    typer.Option(help="Your controller as package.module:Class, instead of the built-in NMPC."),
+    typer.Option(
+        help="Your controller as package.module:Class, or ros2 (your ROS 2 node, "
+        "docs/ros2.md), instead of the built-in NMPC."
+    ),
 ]
 RegressControllerOption = Annotated[
     str | None,
@@ -485,7 +488,7 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
             name: naming ``option``.
     """
     from hazardhunt.campaign.plugins import PluginSpec
-    from hazardhunt.sut.plugins import PluginError, load_attribute
+    from hazardhunt.sut.plugins import PluginError, controller_path, load_attribute
 
     if path is None:
         if params:
@@ -497,7 +500,10 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
         search_path=[str(Path.cwd())],
     )
     try:  # the user named it: importing it here says which option names what does not load
-        load_attribute(spec.path, spec.search_path)
+        load_attribute(
+            controller_path(spec.path) if option == "--controller" else spec.path,
+            spec.search_path,
+        )
     except PluginError as error:
         raise ConfigError(f"{option}: {error}") from None
     return spec

@@ -27,7 +27,13 @@ from hazardhunt.spec.failure_classes import (
     adapt_classifier,
 )
 from hazardhunt.sut.guard import is_plugin_fault, raised
-from hazardhunt.sut.plugins import PluginError, build, build_controller, build_safety_layer
+from hazardhunt.sut.plugins import (
+    BUILT_IN_CONTROLLERS,
+    PluginError,
+    build,
+    build_controller,
+    build_safety_layer,
+)
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.base import Tester
@@ -105,8 +111,10 @@ def allowed_plugin(
             f"file's plug-ins ({TRUST_OPTION})"
         )
     if announce is not None:
-        module = chosen.path.partition(":")[0]
-        announce(f"importing module {module!r} ({reason})")
+        if chosen.path in BUILT_IN_CONTROLLERS:  # a built-in one runs what its parameters say
+            announce(f"controller {chosen.path} with {chosen.params!r} ({reason})")
+        else:
+            announce(f"importing module {chosen.path.partition(':')[0]!r} ({reason})")
     return chosen
 
 

@@ -34,6 +34,16 @@ MOVED_MODULES = {"hazardhunt.sut.conservative": "hazardhunt.benchmark.conservati
 still loads, with a warning."""
 
 
+BUILT_IN_CONTROLLERS = {"ros2": "hazardhunt.sut.ros2.bridge:Ros2Controller"}
+"""Controllers that ship with hazardhunt, by the name that stands for their import path
+(``--controller ros2``, ``path = "ros2"`` in a campaign file's ``[controller]``)."""
+
+
+def controller_path(name: str) -> str:
+    """The import path of the built-in controller ``name``, else ``name`` itself."""
+    return BUILT_IN_CONTROLLERS.get(name, name)
+
+
 def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
     """The object an import path ``module:attribute`` names.
 
@@ -170,7 +180,10 @@ def build_controller(
     path: str, params: Mapping[str, Any] | None = None, search_path: Sequence[str] = ()
 ) -> Controller:
     """A user's controller (see :func:`build`), whose ``control_period`` is a positive number;
-    one written for an earlier protocol is adapted (:mod:`hazardhunt.sut.compat`)."""
+    one written for an earlier protocol is adapted (:mod:`hazardhunt.sut.compat`). A name of
+    :data:`BUILT_IN_CONTROLLERS` builds that controller, whose own errors name what is wrong."""
+    if path in BUILT_IN_CONTROLLERS:
+        return _built_in_controller(path, params or {})
     controller: Controller = build("controller", path, params or {}, Controller, search_path)
     controller = adapt_controller(path, controller)
     period = controller.control_period
@@ -192,3 +205,18 @@ def build_safety_layer(
     (:mod:`hazardhunt.sut.compat`)."""
     layer: SafetyLayer = build("safety layer", path, params or {}, SafetyLayer, search_path)
     return adapt_safety_layer(path, layer)
+
+
+def _built_in_controller(name: str, params: Mapping[str, Any]) -> Controller:
+    """The built-in controller ``name`` (a key of :data:`BUILT_IN_CONTROLLERS`) with ``params``.
+
+    Raises:
+        PluginError: Parameters it does not take, or its own (a missing package, a bad value).
+    """
+    factory = load_attribute(BUILT_IN_CONTROLLERS[name])
+    try:
+        inspect.signature(factory).bind(**params)
+    except TypeError as error:
+        raise PluginError(f"{name}: does not take these parameters: {error}") from None
+    controller: Controller = factory(**params)
+    return controller
