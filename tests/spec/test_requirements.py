@@ -269,3 +269,34 @@ def test_searching_on_what_cannot_be_searched_is_refused(tmp_path, options, says
     assert done.returncode == 2
     assert says in done.stderr
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("lines", "says"),
+    [
+        (
+            'testers = ["random"]\nsearch_on = "separation"\n',
+            "is not one of the run's requirements",
+        ),
+        (
+            'testers = ["ppo-acc"]\nrequirements = ["separation"]\nsearch_on = "separation"\n',
+            "tester 'ppo-acc' learns from the risk summed per decision",
+        ),
+        (
+            'testers = ["mine"]\nrequirements = ["separation"]\nsearch_on = "separation"\n'
+            '[tester.mine]\nmethod = "ppo-novelty"\n',
+            "tester 'mine' learns from the risk summed per decision",
+        ),
+    ],
+    ids=["not-a-requirement", "ppo-acc", "method-ppo-novelty"],
+)
+def test_a_campaign_searching_on_what_cannot_be_searched_is_one_line(tmp_path, lines, says):
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["2m"]\nseeds = [0]\nepisodes = 5\n' + lines
+    )
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "out", cwd=ROOT)
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: {campaign}: search_on: {says}")
+    assert not (tmp_path / "out").exists()

@@ -498,6 +498,10 @@ class CampaignConfig(_Strict):
         for name in dict.fromkeys([] if _stored(info) else [*self.tester, *self.testers]):
             if name not in self.tester_plugins:  # built, as a stored campaign's are not
                 _check_tester_params(name, self.tester.get(name, {}), self.env, ("tester", name))
+        if self.search_on is not None and not _stored(info):
+            for name in self.testers:  # as each run would check it, but naming the file's key
+                params = self.tester.get(name, {})
+                _check_search_on(self.search_on, self.requirements, name, params)
         for index, scenario in enumerate([] if _recorded(info) else self.scenarios):
             problem = route_problem(scenario, self.env.robot)
             if problem is not None:
