@@ -421,6 +421,19 @@ def test_regress_imports_a_case_plug_in_when_allowed_and_says_which(tmp_path, op
     assert result["outcome"] != "sut_error"
 
 
+def test_a_received_case_whose_formula_would_take_hours_is_refused_in_one_line(tmp_path):
+    case = case_file(tmp_path, {"path": "hazardhunt.benchmark.conservative:ConservativeController"})
+    nested = "always[0:3600](" * 40 + "clearance > 0" + ")" * 40
+    read = tomllib.loads(case.read_text())
+    read["requirement"] = {"name": "gap", "formula": nested}
+    read["expected"]["class"] = "gap/clearance"
+    case.write_text(tomli_w.dumps(read))
+    done = hazardhunt("regress", case, "--trust-plugins", timeout=60)
+    assert done.returncode == 2
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {case} [requirement]: requirement 'gap': formula: too costly")
+
+
 @pytest.mark.parametrize("run_id", ["../../../../ESCAPED", "/tmp/ABSOLUTE"])
 def test_a_received_run_id_never_takes_export_outside_its_folder(run, tmp_path, run_id):
     from hazardhunt.campaign.store import file_checksums

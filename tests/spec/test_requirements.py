@@ -117,6 +117,15 @@ def test_a_formula_that_cannot_be_monitored_names_file_requirement_and_position(
             "not " * 30 + "clearance >= 1",
             "formula: 30 negations ('not', '!'), at most 12",
         ),
+        (
+            "always[0:3600](" * 40 + "clearance >= 1" + ")" * 40,
+            "formula: too costly to evaluate: about 1.3e+10 steps per episode (each temporal "
+            "operator nested adds the samples of its time bound), at most 4e+08",
+        ),
+        (
+            "(clearance >= 1) until[0:300] (robot_speed < 1)",
+            "formula: too costly to evaluate: about 6.8e+10 steps per episode",
+        ),
     ],
 )
 def test_a_formula_too_costly_to_monitor_is_refused_when_read(tmp_path, formula, says):
@@ -129,6 +138,9 @@ def test_a_formula_too_costly_to_monitor_is_refused_when_read(tmp_path, formula,
 
 def test_a_formula_bounded_by_the_longest_episode_is_read():
     assert StlRequirement("long", "eventually[0:3600](goal_distance <= 0.3)").formula
+    nested = "always[0:30](" * 40 + "clearance >= 1" + ")" * 40
+    assert StlRequirement("nested", nested).check(trace(clearance=[2.0] * 150)).robustness == 1
+    assert StlRequirement("until", "(clearance >= 1) until[0:30] (robot_speed < 1)").formula
 
 
 @pytest.mark.parametrize(
