@@ -25,7 +25,7 @@ from typer.core import TyperCommand, TyperGroup
 from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.testers.registry import TESTERS, is_import_path
-from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, cut_short, loads_toml
 from hazardhunt.warning_lines import show_warnings_in_one_line
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
@@ -1260,7 +1260,9 @@ def run() -> None:
     for bad input, see :mod:`hazardhunt.errors`), a file that cannot be written one line and
     exit code 1, a warning it gives one line too, and Ctrl-C says how to resume."""
     show_warnings_in_one_line(
-        lambda text: err_console.print(f"[yellow]warning:[/yellow] {escape(text)}", highlight=False)
+        lambda text: err_console.print(
+            f"[yellow]warning:[/yellow] {escape(cut_short(text))}", highlight=False
+        )
     )
     try:
         app()
@@ -1289,7 +1291,7 @@ def shown(text: str) -> str:
 
 
 def _exit_with(message: str, code: int) -> NoReturn:
-    err_console.print(f"[red]error:[/red] {shown(message)}")
+    err_console.print(f"[red]error:[/red] {shown(cut_short(message))}")
     raise SystemExit(code) from None
 
 

@@ -49,7 +49,12 @@ from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
-from hazardhunt.textfiles import format_validation_error, loads_toml, shown_value
+from hazardhunt.textfiles import (
+    format_validation_error,
+    loads_toml,
+    read_input_text,
+    shown_value,
+)
 from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.geometry import point_rectangle_clearance, to_body_frame
 from hazardhunt.world.scenario import (
@@ -648,7 +653,7 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
         ConfigError: Naming the file, the field and what is wrong.
     """
     try:
-        data = loads_toml(path.read_text(encoding="utf-8"))
+        data = loads_toml(read_input_text(path))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such campaign file") from None
     except IsADirectoryError:

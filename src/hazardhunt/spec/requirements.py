@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import TrajectorySample
 from hazardhunt.spec.outcomes import MAX_EPISODE_DURATION
-from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml, read_input_text
 
 LIBRARY = Path(__file__).with_name("requirements.toml")
 """hazardhunt's named requirements for the shop floor."""
@@ -321,7 +321,7 @@ def load_requirements(path: Path, sampling_period: float = 0.2) -> tuple[StlRequ
             table, or a requirement is malformed.
     """
     try:
-        data = loads_toml(path.read_text(encoding="utf-8"))
+        data = loads_toml(read_input_text(path))
     except OSError as error:
         raise RequirementError(f"{path}: cannot be read: {error.strerror or error}") from None
     except UnicodeDecodeError as error:
