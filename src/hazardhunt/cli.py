@@ -483,7 +483,7 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
         ConfigError: The parameters do not read, or the module does not import or lacks the
             name: naming ``option``.
     """
-    from hazardhunt.campaign.plugins import PluginSpec
+    from hazardhunt.campaign.plugins import PluginSpec, warn_if_in_results
     from hazardhunt.sut.plugins import PluginError, load_attribute
 
     if path is None:
@@ -495,6 +495,7 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
         params=_assignments(f"{option}-param", params),
         search_path=[str(Path.cwd())],
     )
+    warn_if_in_results(spec, f"{option} {path}")
     try:  # the user named it: importing it here says which option names what does not load
         load_attribute(spec.path, spec.search_path)
     except PluginError as error:
