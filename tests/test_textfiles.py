@@ -3,7 +3,12 @@
 import pytest
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from hazardhunt.textfiles import format_validation_error
+from hazardhunt.textfiles import (
+    MAX_INPUT_CHARACTERS,
+    MAX_LINE_CHARACTERS,
+    format_validation_error,
+)
+from tests.helpers import hazardhunt
 
 
 class _Strict(BaseModel):
@@ -65,3 +70,50 @@ def test_without_the_schema_an_unknown_key_is_named_without_a_guess():
     with pytest.raises(ValidationError) as caught:
         Scenario.model_validate({"episods": 3})
     assert format_validation_error(caught.value) == "episods: unknown key"
+
+
+@pytest.mark.parametrize(
+    ("command", "says"),
+    [
+        (["campaign", "{file}", "--out", "{out}"], "{file}: cannot be read: "),
+        (["run", "--scenario", "{file}", "--out", "{out}"], "scenario: {file}: cannot be read: "),
+        (
+            ["run", "--requirement", "{file}", "--out", "{out}"],
+            "requirements: {file}: cannot be read: ",
+        ),
+        (
+            ["estimate", "--people", "{file}", "--episodes", "100", "--out", "{out}"],
+            "{file}: cannot read the model of people: ",
+        ),
+        (
+            ["estimate", "--uncertainties", "{file}", "--episodes", "100", "--out", "{out}"],
+            "{file}: cannot read the model of the uncertainties: ",
+        ),
+    ],
+    ids=["campaign", "scenario", "requirements", "people", "uncertainties"],
+)
+def test_an_input_file_larger_than_any_input_needs_is_one_line_before_it_is_read(
+    tmp_path, command, says
+):
+    file, out = tmp_path / "huge.toml", tmp_path / "out"
+    file.write_text("#" + " " * MAX_INPUT_CHARACTERS + "\n")  # parsing it is not what is slow
+    done = hazardhunt(*(part.format(file=file, out=out) for part in command))
+    assert done.returncode == 2
+    expected = "larger than 1,000,000 characters, the most hazardhunt reads from one input file"
+    assert done.stderr.strip().splitlines() == [f"error: {says.format(file=file)}{expected}"]
+    assert not out.exists()
+
+
+def test_an_error_line_echoes_a_value_from_a_file_cut_short(tmp_path):
+    campaign = tmp_path / "campaign.toml"
+    name = "x" * 900_000
+    campaign.write_text(
+        f'scenarios = ["crossing"]\nfields = ["none"]\ntesters = ["{name}"]\nseeds = [0]\n'
+        "episodes = 2\n"
+    )
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "out")
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: {campaign}: testers.0: unknown tester 'xxx")
+    assert len(line) < MAX_LINE_CHARACTERS + 100
+    assert line.endswith(" more characters)")

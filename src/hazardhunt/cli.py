@@ -26,7 +26,7 @@ from hazardhunt.campaign.config import ConfigError
 from hazardhunt.errors import HazardhuntError
 from hazardhunt.sut.guard import notice_ctrl_c
 from hazardhunt.testers.registry import TESTERS, is_import_path
-from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, TomlTooDeepError, cut_short, loads_toml
 from hazardhunt.warning_lines import printable, show_warnings_in_one_line
 from hazardhunt.world.scenario import BUILTIN_SCENARIOS
 
@@ -487,7 +487,7 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
         ConfigError: The parameters do not read, or the module does not import or lacks the
             name: naming ``option``.
     """
-    from hazardhunt.campaign.plugins import PluginSpec
+    from hazardhunt.campaign.plugins import PluginSpec, warn_if_in_results
     from hazardhunt.sut.plugins import PluginError, controller_path, load_attribute
 
     if path is None:
@@ -499,6 +499,7 @@ def _plugin(option: str, path: str | None, params: list[str] | None) -> PluginSp
         params=_assignments(f"{option}-param", params),
         search_path=[str(Path.cwd())],
     )
+    warn_if_in_results(spec, f"{option} {path}")
     try:  # the user named it: importing it here says which option names what does not load
         load_attribute(
             controller_path(spec.path) if option == "--controller" else spec.path,
@@ -1271,7 +1272,9 @@ def run() -> None:
     ``KeyboardInterrupt`` a plug-in raises, which is the plug-in's error)."""
     notice_ctrl_c()
     show_warnings_in_one_line(
-        lambda text: err_console.print(f"[yellow]warning:[/yellow] {escape(text)}", highlight=False)
+        lambda text: err_console.print(
+            f"[yellow]warning:[/yellow] {escape(cut_short(text))}", highlight=False
+        )
     )
     try:
         app()
@@ -1299,7 +1302,7 @@ def shown(text: str) -> str:
 
 
 def _exit_with(message: str, code: int) -> NoReturn:
-    err_console.print(f"[red]error:[/red] {shown(message)}")
+    err_console.print(f"[red]error:[/red] {shown(cut_short(message))}")
     raise SystemExit(code) from None
 
 

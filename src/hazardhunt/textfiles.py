@@ -1,16 +1,20 @@
-"""Reading TOML that anyone may have written: a file nested too deeply for the parser is a
+"""Reading TOML that anyone may have written: a file larger than any input needs is refused
+before it is parsed (:func:`read_input_text`); a file nested too deeply for the parser is a
 decoding error that names the problem, never a ``RecursionError``; a value the file's schema
-refuses is one line in the file's own words (:func:`format_validation_error`)."""
+refuses is one line in the file's own words (:func:`format_validation_error`), and no line
+echoes a value without bound (:func:`cut_short`)."""
 
 from __future__ import annotations
 
 import difflib
+import errno
 import hashlib
 import re
 import sys
 import types
 import typing
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
@@ -23,6 +27,54 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 TOMLDecodeError = tomllib.TOMLDecodeError
+
+
+MAX_INPUT_CHARACTERS = 1_000_000
+"""The most characters hazardhunt reads from one input file the user writes (a campaign,
+scenario, map, requirements, people or uncertainties file): some hundred times the largest
+it ships. Checking a larger one could take minutes before anything runs (an 8 MB people file
+took 75 s)."""
+
+MAX_LINE_CHARACTERS = 1000
+"""The most characters of one error or warning line: a value it echoes from a file (a name,
+a list) is cut there."""
+
+
+class InputTooLargeError(OSError):
+    """An input file of more than :data:`MAX_INPUT_CHARACTERS`; its ``strerror`` says so."""
+
+    def __init__(self, path: Path, limit: int) -> None:
+        super().__init__(
+            errno.EFBIG,
+            f"larger than {limit:,} characters, the most hazardhunt reads from one input file",
+            str(path),
+        )
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def read_input_text(path: Path, limit: int = MAX_INPUT_CHARACTERS) -> str:
+    """``path.read_text(encoding="utf-8")``, refusing a file of more than ``limit``
+    characters without reading the rest of it.
+
+    Raises:
+        InputTooLargeError: The file holds more than ``limit`` characters.
+        OSError: It cannot be read.
+        UnicodeDecodeError: It is not UTF-8 text.
+    """
+    with path.open(encoding="utf-8") as file:
+        text = file.read(limit + 1)
+    if len(text) > limit:
+        raise InputTooLargeError(path, limit)
+    return text
+
+
+def cut_short(line: str, limit: int = MAX_LINE_CHARACTERS) -> str:
+    """``line``, or its first ``limit`` characters and how many more it has."""
+    if len(line) <= limit:
+        return line
+    return f"{line[:limit]}... ({len(line) - limit:,} more characters)"
 
 
 class TomlTooDeepError(TOMLDecodeError):

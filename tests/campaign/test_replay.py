@@ -209,7 +209,8 @@ def test_replaying_a_received_run_imports_nothing_it_names(received):
     [line] = done.stderr.strip().splitlines()
     assert line.startswith(f"error: {run / 'config.json'}: run.controller: names the plug-in ")
     assert "'os:system'" in line
-    assert "(--controller os:system)" in line
+    assert "(--controller package.module:Class)" in line  # one's own, not the run's
+    assert "--controller os:system" not in line
     assert "(--trust-plugins)" in line
     # Naming another controller is not enough: the safety layer is the run's too.
     done = hazardhunt(
@@ -228,11 +229,12 @@ def test_reporting_and_exporting_a_received_run_imports_nothing(received):
     assert report.returncode == 0, report.stderr
     representatives = pd.read_csv(run / "report" / "tables" / "representatives.csv")
     assert set(representatives["pictures"]) == {"drawn as recorded"}
-    # Its advice never trusts the run's plug-ins wholesale, and names what would be imported.
+    # Its advice never trusts the run's plug-ins wholesale, nor names them as what to type.
     page = (run / "report" / "index.html").read_text()
     assert "--trust-plugins" not in page
-    assert "--controller os:system" in page
-    assert "Read that code before you run regress with it" in page
+    assert "os:system" not in page
+    assert "--controller package.module:Class --safety-layer package.module:Class" in page
+    assert "The runs name plug-ins of their own (--controller, --safety-layer)" in page
     for name in representatives["class"]:  # drawn from the record: no SUT is built
         stem = run / "report" / "figures" / f"class_{name.replace('/', '_')}"
         assert stem.with_suffix(".png").is_file()

@@ -386,7 +386,8 @@ def test_regress_on_a_received_case_imports_nothing_it_names(tmp_path):
         assert "--trust-plugins" in line
         if path is not None:
             assert f"error: {target}: sut.controller: names the plug-in {path!r}" in line
-            assert f"(--controller {path})" in line
+            assert "(--controller package.module:Class)" in line  # one's own, not the case's
+            assert f"--controller {path}" not in line
     assert not pwned.exists()
     assert not marker.exists()
 
@@ -419,6 +420,19 @@ def test_regress_imports_a_case_plug_in_when_allowed_and_says_which(tmp_path, op
     assert marker.exists()
     [result] = json.loads(done.stdout)["cases"]
     assert result["outcome"] != "sut_error"
+
+
+def test_a_received_case_whose_formula_would_take_hours_is_refused_in_one_line(tmp_path):
+    case = case_file(tmp_path, {"path": "hazardhunt.benchmark.conservative:ConservativeController"})
+    nested = "always[0:3600](" * 40 + "clearance > 0" + ")" * 40
+    read = tomllib.loads(case.read_text())
+    read["requirement"] = {"name": "gap", "formula": nested}
+    read["expected"]["class"] = "gap/clearance"
+    case.write_text(tomli_w.dumps(read))
+    done = hazardhunt("regress", case, "--trust-plugins", timeout=60)
+    assert done.returncode == 2
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {case} [requirement]: requirement 'gap': formula: too costly")
 
 
 @pytest.mark.parametrize("run_id", ["../../../../ESCAPED", "/tmp/ABSOLUTE"])
@@ -512,3 +526,39 @@ def test_a_requirements_violations_export_as_cases_that_regress_checks_against_i
     )
     with pytest.raises(CaseError, match=rf"{path.name} \[requirement\]: requirement 'x'.*gap"):
         regress_case(path)
+
+
+@pytest.mark.parametrize(
+    "option",
+    [["--trust-plugins"], ["--controller", "marker_sut:Controller"]],
+    ids=["trusted", "named"],
+)
+def test_a_plug_in_imported_from_inside_a_received_folder_is_warned_of_first(tmp_path, option):
+    received = tmp_path / "received"
+    received.mkdir()
+    marker = tmp_path / "imported"
+    case_file(received, {"path": marker_module(received, marker)})  # shipped beside the case
+    done = hazardhunt("regress", received, *option, cwd=received)
+    lines = done.stderr.splitlines()
+    assert lines[0].startswith(
+        f"warning: module 'marker_sut' is imported from {received}, a folder of regression "
+        "cases: code that came with results, not code of your own ("
+    )
+    assert lines[1].startswith("importing module 'marker_sut' (")
+    assert marker.exists()
+
+
+def test_a_plug_in_of_ones_own_beside_a_campaign_file_is_imported_without_a_warning(tmp_path):
+    marker = tmp_path / "imported"
+    path = marker_module(tmp_path, marker)
+    (tmp_path / "campaign.toml").write_text(
+        'scenarios = ["head-on"]\nfields = ["none"]\ntesters = ["random"]\nseeds = [0]\n'
+        f'episodes = 2\n[controller]\npath = "{path}"\n'
+    )
+    done = hazardhunt(
+        "run", "--scenario", "head-on", "--field", "none", "--episodes", 2,
+        "--controller", path, "--out", tmp_path / "run", cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "warning" not in done.stderr
+    assert marker.exists()

@@ -117,6 +117,15 @@ def test_a_formula_that_cannot_be_monitored_names_file_requirement_and_position(
             "not " * 30 + "clearance >= 1",
             "formula: 30 negations ('not', '!'), at most 12",
         ),
+        (
+            "always[0:3600](" * 40 + "clearance >= 1" + ")" * 40,
+            "formula: too costly to evaluate: about 1.3e+10 steps per episode (each temporal "
+            "operator nested adds the samples of its time bound), at most 4e+08",
+        ),
+        (
+            "(clearance >= 1) until[0:300] (robot_speed < 1)",
+            "formula: too costly to evaluate: about 6.8e+10 steps per episode",
+        ),
     ],
 )
 def test_a_formula_too_costly_to_monitor_is_refused_when_read(tmp_path, formula, says):
@@ -129,6 +138,9 @@ def test_a_formula_too_costly_to_monitor_is_refused_when_read(tmp_path, formula,
 
 def test_a_formula_bounded_by_the_longest_episode_is_read():
     assert StlRequirement("long", "eventually[0:3600](goal_distance <= 0.3)").formula
+    nested = "always[0:30](" * 40 + "clearance >= 1" + ")" * 40
+    assert StlRequirement("nested", nested).check(trace(clearance=[2.0] * 150)).robustness == 1
+    assert StlRequirement("until", "(clearance >= 1) until[0:30] (robot_speed < 1)").formula
 
 
 @pytest.mark.parametrize(
@@ -269,3 +281,34 @@ def test_searching_on_what_cannot_be_searched_is_refused(tmp_path, options, says
     assert done.returncode == 2
     assert says in done.stderr
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("lines", "says"),
+    [
+        (
+            'testers = ["random"]\nsearch_on = "separation"\n',
+            "is not one of the run's requirements",
+        ),
+        (
+            'testers = ["ppo-acc"]\nrequirements = ["separation"]\nsearch_on = "separation"\n',
+            "tester 'ppo-acc' learns from the risk summed per decision",
+        ),
+        (
+            'testers = ["mine"]\nrequirements = ["separation"]\nsearch_on = "separation"\n'
+            '[tester.mine]\nmethod = "ppo-novelty"\n',
+            "tester 'mine' learns from the risk summed per decision",
+        ),
+    ],
+    ids=["not-a-requirement", "ppo-acc", "method-ppo-novelty"],
+)
+def test_a_campaign_searching_on_what_cannot_be_searched_is_one_line(tmp_path, lines, says):
+    campaign = tmp_path / "campaign.toml"
+    campaign.write_text(
+        'scenarios = ["crossing"]\nfields = ["2m"]\nseeds = [0]\nepisodes = 5\n' + lines
+    )
+    done = hazardhunt("campaign", campaign, "--out", tmp_path / "out", cwd=ROOT)
+    assert done.returncode == 2
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: {campaign}: search_on: {says}")
+    assert not (tmp_path / "out").exists()

@@ -811,13 +811,14 @@ def _regression_commands(section: Section, results: Results) -> None:
     commands = verdict.regression_commands(results.directory, plugins)
     section.blocks.append(Heading("Keep them as regression cases"))
     section.blocks.append(Commands(tuple(commands)))
-    named = [f"{option} {path}" for option, paths in plugins.items() for path in paths]
+    named = [option for option, paths in plugins.items() if paths]
     if named:
         section.blocks.append(
             Text(
-                f"The runs name plug-ins ({'; '.join(named)}): code from the results, which "
-                "hazardhunt imports only because the command names it. Read that code before "
-                "you run regress with it, or name your own.",
+                f"The runs name plug-ins of their own ({', '.join(named)}): code that came "
+                "with the results, which regress does not import. Put the import path of your "
+                "own in the command (package.module:Class, found in the working directory), "
+                "or read the runs' code before you trust it.",
                 "warning",
             )
         )

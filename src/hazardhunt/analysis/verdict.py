@@ -163,12 +163,12 @@ def regression_commands(
 
     ``plugins``: per option (``--controller``, ``--safety-layer``) the plug-ins the runs name
     (code in results, which ``regress`` imports only when told to). The ``regress`` command
-    names the first of each, so that what it would import stands on the line: never a blanket
-    ``--trust-plugins``.
+    has the option of each with a place for the user's own import path: never an import path
+    the results name, nor a blanket ``--trust-plugins``.
     """
     cases = directory / "cases"
     named = "".join(
-        f" {option} {shlex.quote(paths[0])}" for option, paths in (plugins or {}).items() if paths
+        f" {option} package.module:Class" for option, paths in (plugins or {}).items() if paths
     )
     return [
         f"hazardhunt export {shlex.quote(str(directory))} --out {shlex.quote(str(cases))}",

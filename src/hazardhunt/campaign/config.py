@@ -50,7 +50,12 @@ from hazardhunt.sut.route import RoutePlanningError, scenario_route
 from hazardhunt.sut.safety_layer import FIELD_SETTINGS, scenario_field_shapes
 from hazardhunt.testers.base import TesterParameterError
 from hazardhunt.testers.registry import TESTERS, make_tester
-from hazardhunt.textfiles import format_validation_error, loads_toml, shown_value
+from hazardhunt.textfiles import (
+    format_validation_error,
+    loads_toml,
+    read_input_text,
+    shown_value,
+)
 from hazardhunt.world.bodies import HumanParams, RobotParams
 from hazardhunt.world.geometry import point_rectangle_clearance, to_body_frame
 from hazardhunt.world.scenario import (
@@ -511,6 +516,10 @@ class CampaignConfig(_Strict):
         for name in dict.fromkeys([] if _stored(info) else [*self.tester, *self.testers]):
             if name not in self.tester_plugins:  # built, as a stored campaign's are not
                 _check_tester_params(name, self.tester.get(name, {}), self.env, ("tester", name))
+        if self.search_on is not None and not _stored(info):
+            for name in self.testers:  # as each run would check it, but naming the file's key
+                params = self.tester.get(name, {})
+                _check_search_on(self.search_on, self.requirements, name, params)
         for index, scenario in enumerate([] if _recorded(info) else self.scenarios):
             problem = route_problem(scenario, self.env.robot)
             if problem is not None:
@@ -657,7 +666,7 @@ def load_campaign(path: Path, classifier: PluginSpec | None = None) -> CampaignC
         ConfigError: Naming the file, the field and what is wrong.
     """
     try:
-        data = loads_toml(path.read_text(encoding="utf-8"))
+        data = loads_toml(read_input_text(path))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such campaign file") from None
     except IsADirectoryError:

@@ -8,11 +8,15 @@ line is read (:func:`hazardhunt.campaign.config.check_plugins`).
 A plug-in is code, imported because the user named it: on the command line or in their own
 campaign file. A plug-in named in a file hazardhunt reads back (a run's ``config.json``, a
 regression case) is data: :func:`allowed_plugin` lets it be imported only when the user names it
-again or trusts the file's plug-ins, and says which module is about to be imported.
+again or trusts the file's plug-ins, and says which module is about to be imported. Its errors
+never suggest the import path a file names as what to type: the user names their own. A module
+that would be imported from a run, campaign, estimate or case folder (a ``.py`` that came with
+results) is warned of first (:func:`warn_if_in_results`).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -33,11 +37,13 @@ from hazardhunt.sut.plugins import (
     build,
     build_controller,
     build_safety_layer,
+    module_folder,
 )
 from hazardhunt.sut.protocols import Controller, SafetyLayer
 from hazardhunt.sut.safety_layer import FieldShape
 from hazardhunt.testers.base import Tester
 from hazardhunt.testers.registry import build_tester
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml, read_input_text
 from hazardhunt.world.bodies import RobotParams
 
 T = TypeVar("T")
@@ -57,6 +63,9 @@ class PluginSpec(BaseModel):
     plug-in named on the command line, plus the campaign file's directory for one named in a
     campaign file; never the directory of a file read back (see :func:`allowed_plugin`)."""
 
+
+OWN_PLUGIN = "package.module:Class"
+"""How an error shows the import path of one's own plug-in, in place of the one a file names."""
 
 TRUST_OPTION = "--trust-plugins"
 """The command-line flag that lets ``replay`` and ``regress`` import the plug-ins a file names."""
@@ -106,16 +115,69 @@ def allowed_plugin(
         reason = f"{TRUST_OPTION}: {where} names {stored.path}"
     else:
         raise UntrustedPluginError(
-            f"{where}: names the plug-in {stored.path!r}, code that hazardhunt does not import "
-            f"from a file it reads; to run it, name it ({option} {stored.path}) or trust this "
-            f"file's plug-ins ({TRUST_OPTION})"
+            f"{where}: names the plug-in {shown_path(stored.path)}, code that hazardhunt does "
+            "not import from a file it reads; to test with your own, name it "
+            f"({option} {OWN_PLUGIN}), or, having read that code, trust this file's plug-ins "
+            f"({TRUST_OPTION})"
         )
+    warn_if_in_results(chosen, reason)
     if announce is not None:
         if chosen.path in BUILT_IN_CONTROLLERS:  # a built-in one runs what its parameters say
             announce(f"controller {chosen.path} with {chosen.params!r} ({reason})")
         else:
             announce(f"importing module {chosen.path.partition(':')[0]!r} ({reason})")
     return chosen
+
+
+def shown_path(path: str) -> str:
+    """An import path a file names, quoted and cut short, to say what it names (never as a
+    command to type)."""
+    return repr(path if len(path) <= 80 else path[:77] + "...")
+
+
+CASE_KEYS = frozenset({"format", "expected", "human"})
+"""Top-level tables and keys every regression case file has."""
+
+
+def results_folder(directory: Path) -> str | None:
+    """What kind of folder hazardhunt writes ``directory`` is (``a run folder``, ``a campaign
+    folder``, ``an estimate folder``, ``a folder of regression cases``), None if none."""
+    if (directory / "campaign.json").is_file():
+        return "a campaign folder"
+    if (directory / "config.json").is_file():
+        if (directory / "batches").is_dir() or (directory / "estimate.json").is_file():
+            return "an estimate folder"
+        if (directory / "episodes.parquet").is_file() or (directory / "summary.json").is_file():
+            return "a run folder"
+    for path in sorted(directory.glob("*.toml"))[:20]:
+        try:
+            if set(loads_toml(read_input_text(path))) >= CASE_KEYS:
+                return "a folder of regression cases"
+        except (OSError, UnicodeDecodeError, TOMLDecodeError):
+            continue
+    return None
+
+
+def warn_if_in_results(spec: PluginSpec, named_by: str) -> None:
+    """Warn, in one line and before anything is imported, if the module of ``spec`` would be
+    imported from a folder of results (a ``.py`` file that came with a run or a case, found
+    because the working directory is that folder), rather than from the user's own code.
+
+    Args:
+        spec: The plug-in about to be imported.
+        named_by: How the user named it, for the message (``--controller x:Y``).
+    """
+    if spec.path in BUILT_IN_CONTROLLERS:  # hazardhunt's own code, whatever the folder holds
+        return
+    folder = module_folder(spec.path, spec.search_path)
+    kind = None if folder is None else results_folder(folder)
+    if folder is not None and kind is not None:
+        module = spec.path.partition(":")[0].partition(".")[0]
+        warnings.warn(
+            f"module {module!r} is imported from {folder}, {kind}: code that came with "
+            f"results, not code of your own ({named_by})",
+            stacklevel=3,
+        )
 
 
 def make_controller(spec: PluginSpec) -> Controller:

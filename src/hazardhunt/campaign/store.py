@@ -42,6 +42,7 @@ from hazardhunt.campaign.records import (
     summary_problem,
 )
 from hazardhunt.campaign.table_checks import table_problem
+from hazardhunt.file_writes import file_written
 from hazardhunt.spec.episode import (
     SUMMARY_COLUMNS,
     TIMING_COLUMNS,
@@ -104,12 +105,13 @@ def write_bytes_atomic(path: Path, payload: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
-        os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes it private; keep the umask's
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(payload)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(temporary, path)
+        with file_written(Path(temporary), named=path):  # a full disk: an error naming path
+            os.chmod(temporary, 0o666 & ~_umask())  # mkstemp makes it private; keep the umask's
+            with os.fdopen(handle, "wb") as stream:
+                stream.write(payload)
+                stream.flush()
+                os.fsync(stream.fileno())
+            os.replace(temporary, path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
@@ -365,7 +367,7 @@ class RunStore:
         self._flush_trajectories()
         judged = [REQUIREMENT_COLUMN + name for name in self.requirements]
         episodes = pd.DataFrame(self.episodes, columns=[*EPISODE_COLUMNS, *judged])
-        episodes.to_parquet(self.directory / "episodes.parquet", index=False)
+        _write_table(episodes, self.directory / "episodes.parquet")
         failure_columns = [
             "episode",
             *self.replay_keys,
@@ -376,28 +378,35 @@ class RunStore:
             "actions",
         ]
         failures = pd.DataFrame(self.failures, columns=failure_columns)
-        failures.to_parquet(self.directory / "failures.parquet", index=False)
+        _write_table(failures, self.directory / "failures.parquet")
         loitering = pd.DataFrame(
             self.loitering,
             columns=["episode", *self.replay_keys, *LOITERING_COLUMNS, "actions"],
         )
-        loitering.to_parquet(self.directory / "loitering.parquet", index=False)
+        _write_table(loitering, self.directory / "loitering.parquet")
         if self.formulas:
             violations = pd.DataFrame(
                 self.violations,
                 columns=["episode", *self.replay_keys, *VIOLATION_COLUMNS, "actions"],
             )
-            violations.to_parquet(self.directory / "violations.parquet", index=False)
+            _write_table(violations, self.directory / "violations.parquet")
 
     def _flush_trajectories(self) -> None:
         if not self._trajectory_rows:
             return
         part = self.directory / "trajectories" / f"part-{self._parts:05d}.parquet"
         columns = ["episode", *TRAJECTORY_COLUMNS]
-        pd.DataFrame(self._trajectory_rows, columns=columns).to_parquet(part, index=False)
+        _write_table(pd.DataFrame(self._trajectory_rows, columns=columns), part)
         self._parts += 1
         self._trajectory_rows = []
         self._buffered_failures = 0
+
+
+def _write_table(table: pd.DataFrame, path: Path) -> None:
+    """Write a table of a run (in its ``.partial`` directory): on a full disk, an error that
+    names the file, and no half-written file left."""
+    with file_written(path):
+        table.to_parquet(path, index=False)
 
 
 def read_trajectory(run_directory: Path, episode: int) -> list[TrajectorySample]:

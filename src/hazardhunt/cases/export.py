@@ -18,6 +18,7 @@ from hazardhunt.campaign.plugins import PluginSpec, make_classifier
 from hazardhunt.campaign.replay import load_run_config
 from hazardhunt.campaign.scenario_record import played_scenario_data
 from hazardhunt.cases.regression import CASE_FORMAT, CaseError
+from hazardhunt.file_writes import file_written
 
 
 def export_cases(
@@ -126,7 +127,8 @@ def _write_case(out: Path, case: dict[str, Any]) -> Path:
         f"# {what} hazardhunt found, as a regression case: {case['expected']['class']}\n"
         f"# Re-run it with: hazardhunt regress {path.name}\n"
     )
-    path.write_text(header + tomli_w.dumps(case), encoding="utf-8")
+    with file_written(path):
+        path.write_text(header + tomli_w.dumps(case), encoding="utf-8")
     return path
 
 
@@ -277,5 +279,6 @@ def write_pytest_module(
             trust_plugins=trust_plugins,
         )
     path = out / "test_hazardhunt_cases.py"
-    path.write_text(source, encoding="utf-8")
+    with file_written(path):
+        path.write_text(source, encoding="utf-8")
     return path

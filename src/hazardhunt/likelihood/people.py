@@ -42,7 +42,7 @@ from hazardhunt.likelihood.distributions import (
 from hazardhunt.sim.simulation import Action, Policy, Simulation, UnusableActionError, human_action
 from hazardhunt.sut.guard import is_plugin_fault, raised
 from hazardhunt.sut.plugins import build
-from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml, read_input_text
 from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.floor import FloorMap
 from hazardhunt.world.geometry import point_rectangle_clearance
@@ -301,7 +301,7 @@ def _model_text(file: str | Path | None) -> tuple[str, str]:
         return "people.toml (built-in)", text
     path = Path(file)
     try:
-        return str(path), path.read_text(encoding="utf-8")
+        return str(path), read_input_text(path)
     except (OSError, UnicodeDecodeError) as error:
         raise ModelError(f"{path}: cannot read the model of people: {error}") from None
 

@@ -21,6 +21,7 @@ import pandas as pd
 from pydantic import TypeAdapter, ValidationError
 from typing_extensions import NotRequired, TypedDict  # which pydantic validates on Python 3.11
 
+from hazardhunt.file_writes import file_written
 from hazardhunt.likelihood.estimators import Estimate, either_of, episodes_for, estimate
 from hazardhunt.likelihood.people import DEFAULT_MODEL, ModelError
 from hazardhunt.likelihood.run import (
@@ -349,8 +350,9 @@ def write_summary(directory: Path, summary: dict[str, Any]) -> Path:
     """Write ``estimate.json`` (renamed into place once complete)."""
     path = directory / "estimate.json"
     partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(_finite(summary), indent=1) + "\n")
-    partial.replace(path)
+    with file_written(partial, named=path):
+        partial.write_text(json.dumps(_finite(summary), indent=1) + "\n")
+        partial.replace(path)
     return path
 
 

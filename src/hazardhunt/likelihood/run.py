@@ -34,6 +34,7 @@ from hazardhunt.campaign.plugins import PluginSpec
 from hazardhunt.campaign.simulations import build_simulation, try_sut
 from hazardhunt.campaign.store import symbolic_link_in
 from hazardhunt.errors import HazardhuntError, InputError
+from hazardhunt.file_writes import file_written
 from hazardhunt.likelihood.distributions import Dimension
 from hazardhunt.likelihood.encounters import (
     Draw,
@@ -416,11 +417,13 @@ def _write_batch(directory: Path, batch: int, table: pd.DataFrame, record: dict[
     path = batch_path(directory, batch)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps({"batch": batch, **record}, indent=1) + "\n")
-    partial.replace(path.with_suffix(".json"))
+    with file_written(partial, named=path.with_suffix(".json")):
+        partial.write_text(json.dumps({"batch": batch, **record}, indent=1) + "\n")
+        partial.replace(path.with_suffix(".json"))
     partial = path.with_suffix(".parquet.partial")
-    table.to_parquet(partial, index=False)
-    partial.replace(path)
+    with file_written(partial, named=path):
+        table.to_parquet(partial, index=False)
+        partial.replace(path)
 
 
 def _claim(directory: Path, config: EstimateConfig) -> None:
@@ -456,8 +459,9 @@ def _claim(directory: Path, config: EstimateConfig) -> None:
             (directory / "estimate.json").unlink(missing_ok=True)
     directory.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(wanted, indent=1) + "\n")
-    partial.replace(path)
+    with file_written(partial, named=path):
+        partial.write_text(json.dumps(wanted, indent=1) + "\n")
+        partial.replace(path)
 
 
 def check_no_links(directory: Path) -> None:

@@ -21,7 +21,7 @@ from hazardhunt.likelihood.distributions import (
 )
 from hazardhunt.likelihood.people import ModelError
 from hazardhunt.sim.effects import SutEffects
-from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml, read_input_text
 
 DEFAULT_UNCERTAINTIES = "default"
 """The name of the built-in model of the uncertainties (``uncertainties.toml``)."""
@@ -58,7 +58,7 @@ def load_uncertainties(spec: str | Path | None) -> Uncertainties:
     else:
         where = str(spec)
         try:
-            text = Path(spec).read_text(encoding="utf-8")
+            text = read_input_text(Path(spec))
         except (OSError, UnicodeDecodeError) as error:
             raise ModelError(
                 f"{where}: cannot read the model of the uncertainties: {error}"

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from hazardhunt.errors import InputError
 from hazardhunt.spec.episode import TrajectorySample
 from hazardhunt.spec.outcomes import MAX_EPISODE_DURATION
-from hazardhunt.textfiles import TOMLDecodeError, loads_toml
+from hazardhunt.textfiles import TOMLDecodeError, loads_toml, read_input_text
 
 LIBRARY = Path(__file__).with_name("requirements.toml")
 """hazardhunt's named requirements for the shop floor."""
@@ -230,6 +230,7 @@ def _parsed(formula: str, signals: Sequence[str], period: float, place: str) -> 
         quiet.setLevel(level)
     for node in spec.ast.specs:
         _check_time_bounds(node, place)
+    _check_evaluation_cost(spec.ast.specs, period, place)
     return spec
 
 
@@ -256,6 +257,52 @@ def _check_time_bounds(node: Any, place: str) -> None:
         _check_time_bounds(child, place)
 
 
+MAX_EVALUATION_STEPS = 4e8
+"""The most steps evaluating a formula on one episode may take (about 3 s): one ``always``
+or ``eventually`` bounded by the longest episode takes 3.2e8; rtamt's cost grows with each
+temporal operator nested, by the samples of its time bound (their square for ``until`` and
+``since``), so a formula that passes the other checks could take minutes per episode."""
+
+_PYTHON_STEP = 40
+"""What one step of rtamt's ``until`` and ``since`` costs, in steps of its other operators
+(a Python loop against a C-level ``min`` or ``max`` over a window)."""
+
+
+def _check_evaluation_cost(nodes: Sequence[Any], period: float, place: str) -> None:
+    """Refuse a formula whose evaluation on one episode would take more than
+    :data:`MAX_EVALUATION_STEPS`, counted as rtamt evaluates it offline, on an episode of the
+    default length (30 s) or, if longer, of its longest time bound."""
+    operators: list[tuple[str, int, int]] = []  # kind, window and end of the window in samples
+    pending = list(nodes)
+    while pending:  # a loop, not recursion: the parser has followed the nesting already
+        node = pending.pop()
+        pending.extend(node.children)
+        kind = type(node).__name__
+        if kind.startswith("Timed"):
+            begin, end = (_bound_seconds(node, bound) for bound in ("begin", "end"))
+            last = round(end / period)
+            operators.append((kind, last - round(begin / period) + 1, last))
+        else:
+            operators.append((kind, 1, 0))
+    samples = max([round(30.0 / period) + 1, *(end + 1 for _, _, end in operators)])
+    steps = 0.0
+    for kind, window, end in operators:
+        looped = kind in ("TimedUntil", "TimedSince")
+        steps += samples * window * ((end + 1) / 2 * _PYTHON_STEP if looped else 1)
+    if steps > MAX_EVALUATION_STEPS:
+        raise RequirementError(
+            f"{place}: formula: too costly to evaluate: about {steps:.2g} steps per episode "
+            f"(each temporal operator nested adds the samples of its time bound), at most "
+            f"{MAX_EVALUATION_STEPS:.2g}: nest fewer bounded operators or shorten their bounds"
+        )
+
+
+def _bound_seconds(node: Any, bound: str) -> float:
+    """A time bound of ``node`` in s (a begin without a unit takes the end's, as in rtamt)."""
+    unit = str(getattr(node, f"{bound}_unit", "") or "") or str(node.end_unit or "")
+    return float(getattr(node, bound)) * _SECONDS_PER_UNIT.get(unit, 1.0)
+
+
 def _parse_message(error: Exception) -> str:
     """rtamt's parse error as ``formula position N: what``."""
     text = str(error).replace("RTAMT Exception:", "").strip()
@@ -274,7 +321,7 @@ def load_requirements(path: Path, sampling_period: float = 0.2) -> tuple[StlRequ
             table, or a requirement is malformed.
     """
     try:
-        data = loads_toml(path.read_text(encoding="utf-8"))
+        data = loads_toml(read_input_text(path))
     except OSError as error:
         raise RequirementError(f"{path}: cannot be read: {error.strerror or error}") from None
     except UnicodeDecodeError as error:

@@ -15,6 +15,7 @@ while its module is imported.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import inspect
 import math
 import pkgutil
@@ -22,6 +23,7 @@ import sys
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from hazardhunt.errors import PluginError as PluginError
@@ -80,6 +82,25 @@ def load_attribute(path: str, search_path: Sequence[str] = ()) -> Any:
             if not is_plugin_fault(error):
                 raise
             raise _import_raised(path, module_name, error) from error
+
+
+def module_folder(path: str, search_path: Sequence[str] = ()) -> Path | None:
+    """The directory the top-level module of the import path ``path`` would be imported from
+    (the entry of ``search_path`` or ``sys.path`` that holds its file or package), found
+    without importing anything; None if it is not found there, or is built into Python."""
+    top = path.partition(":")[0].partition(".")[0]
+    with _importable_from(search_path):
+        try:
+            spec = importlib.util.find_spec(top) if top else None
+        except (ImportError, ValueError):
+            return None
+    if spec is None:
+        return None
+    if spec.submodule_search_locations:  # a package: the folder that holds its folder
+        return Path(next(iter(spec.submodule_search_locations))).resolve().parent
+    if spec.origin is None or not spec.has_location:
+        return None
+    return Path(spec.origin).resolve().parent
 
 
 def _import_raised(path: str, module_name: str, error: BaseException) -> PluginError:

@@ -32,7 +32,7 @@ from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
 from hazardhunt.errors import InputError
-from hazardhunt.textfiles import format_validation_error, loads_toml
+from hazardhunt.textfiles import format_validation_error, loads_toml, read_input_text
 from hazardhunt.world.bodies import HumanParams
 from hazardhunt.world.floor import FloorMap, Obstacle
 from hazardhunt.world.geometry import FloatArray
@@ -293,7 +293,7 @@ def _build_scenario(spec: _ScenarioSpec, floor: FloorMap, path: Path) -> Scenari
 
 def _parse(path: Path, model: type[_Strict]) -> Any:
     try:
-        data = loads_toml(path.read_text(encoding="utf-8"))
+        data = loads_toml(read_input_text(path))
     except tomllib.TOMLDecodeError as error:
         raise ScenarioError(f"{path}: not valid TOML: {error}") from error
     except OSError as error:
