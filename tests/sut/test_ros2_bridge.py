@@ -90,6 +90,29 @@ def test_the_answering_node_plays_the_in_process_controllers_episodes_exactly():
     assert through_ros == in_process
 
 
+def test_the_scan_shows_the_true_human_also_where_the_cameras_do_not_see_it():
+    from hazardhunt.world.bodies import RobotParams, RobotState
+
+    simulation = Simulation.build("crossing", "none")  # its floor and route
+    floor = dataclasses.replace(
+        simulation.scenario.floor,
+        blind_zones=(np.array([[9.0, 4.0], [11.0, 4.0], [11.0, 6.0], [9.0, 6.0]]),),
+    )
+    robot = RobotState(5.0, 4.75, 0.0, 0.0, 0.0)  # in the aisle y 4..5.5, facing east
+    bridge = Ros2Controller(command=node_command(TEST_NODES / "scan_echo_node.py"))
+    ahead = []
+    try:
+        bridge.reset(floor, simulation.route, robot, RobotParams())
+        for time_s, sensed in ((0.0, True), (0.2, False)):
+            if sensed:  # as the simulation does at each instant: the true human, untracked
+                bridge.sense_human(time_s, np.array([10.0, 4.75]), 0.25)
+            ahead.append(bridge.control(time_s, robot, None).speed)  # the middle ray's range
+    finally:
+        bridge.close()
+    assert ahead[0] == pytest.approx(4.75, abs=1e-5)  # the human's disc, 10 - 0.25 - 5
+    assert ahead[1] == pytest.approx(14.8, abs=1e-5)  # not given: the east wall at 19.8
+
+
 def test_simulated_time_never_runs_backwards_in_a_nodes_life():
     bridge = Ros2Controller(command=node_command(TEST_NODES / "clock_checking_node.py"))
     try:
