@@ -30,6 +30,8 @@ from hazardhunt.sut.ros2.bridge import Ros2Controller
 
 ROOT = Path(__file__).parents[2]
 PURSUIT_NODE = ROOT / "examples" / "ros2" / "pure_pursuit_node.py"
+NMPC_NODE = ROOT / "examples" / "ros2" / "nmpc_node.py"
+SCENARIOS = ROOT / "src" / "hazardhunt" / "scenarios"
 TEST_NODES = Path(__file__).parent / "ros2_nodes"
 
 
@@ -111,6 +113,48 @@ def test_the_scan_shows_the_true_human_also_where_the_cameras_do_not_see_it():
         bridge.close()
     assert ahead[0] == pytest.approx(4.75, abs=1e-5)  # the human's disc, 10 - 0.25 - 5
     assert ahead[1] == pytest.approx(14.8, abs=1e-5)  # not given: the east wall at 19.8
+
+
+PHYSICAL = ("time", "human_x", "human_y", "human_heading", "robot_x", "robot_y", "robot_heading",
+            "robot_speed", "robot_yaw_rate", "human_visible", "emergency_stop", "human_in_field",
+            "clearance")  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_nmpc_node_plays_the_in_process_nmpcs_episodes(tmp_path):
+    from hazardhunt.sut.nmpc import NMPCController
+
+    # The shop floor's ROS map, published at its own 0.1 m: the node's obstacles are the
+    # in-process NMPC's, in the same order.
+    text = (SCENARIOS / "crossing.toml").read_text()
+    scenario = tmp_path / "crossing-on-map.toml"
+    scenario.write_text(
+        text.replace('"shopfloor.toml"', json.dumps(str(SCENARIOS / "shopfloor.yaml")))
+    )
+    actions = [a for seed in (0, 1) for a in random_actions(seed, 2)]
+
+    def episodes(controller):
+        simulation = Simulation.build(str(scenario), "none", controller=controller)
+        played = []
+        for episode_actions in actions:
+            summary = simulation.simulate(episode_actions).summary
+            trajectory = [[getattr(s, name) for name in PHYSICAL] for s in simulation.trajectory()]
+            played.append(((summary.outcome, summary.contact_face), np.array(trajectory, float)))
+        return played
+
+    bridge = Ros2Controller(command=node_command(NMPC_NODE), map_resolution=0.1)
+    try:
+        through_ros = episodes(bridge)
+    finally:
+        bridge.close()
+    in_process = episodes(NMPCController())
+    assert [e[0] for e in through_ros] == [e[0] for e in in_process]
+    assert {e[0][0] for e in in_process} - {None, "sut_error"}  # episodes that ended
+    for (_, ros), (_, local) in zip(through_ros, in_process, strict=True):
+        assert ros.shape == local.shape
+        # Equal but for the last bits: the stamps' whole nanoseconds and the heading's
+        # quaternion round the node's inputs (docs/ros2.md).
+        np.testing.assert_allclose(ros, local, rtol=0, atol=1e-9)
 
 
 def test_simulated_time_never_runs_backwards_in_a_nodes_life():

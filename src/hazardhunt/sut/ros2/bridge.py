@@ -204,15 +204,7 @@ class Ros2Controller:
         ros = self._session.ros
         stamp = self._offset_ns + round(time * 1e9)
         self._last_ns = max(self._last_ns, stamp)
-        heading = robot.heading
-        mount = self.scanner
-        origin = (
-            robot.x + math.cos(heading) * mount.x - math.sin(heading) * mount.y,
-            robot.y + math.sin(heading) * mount.x + math.cos(heading) * mount.y,
-        )
-        disc = self._scanned_human(time, human)
-        assert self._edges is not None
-        ranges = scan_ranges(self._edges, origin, heading + mount.yaw, mount, disc)
+        ranges = self._scan(time, robot, human) if ros.scan_wanted() else None
         started = _monotonic()
         ros.drain()
         ros.publish_instant(stamp, robot, ranges, self.scanner, human)
@@ -222,6 +214,17 @@ class Ros2Controller:
             self._restart = True
             raise
         return ControlCommand(speed=speed, yaw_rate=yaw_rate, solve_time_s=_monotonic() - started)
+
+    def _scan(self, time: float, robot: RobotState, human: TrackedHuman | None) -> FloatArray:
+        """This instant's ranges, ray-cast from the scanner's pose on the robot."""
+        heading, mount = robot.heading, self.scanner
+        origin = (
+            robot.x + math.cos(heading) * mount.x - math.sin(heading) * mount.y,
+            robot.y + math.sin(heading) * mount.x + math.cos(heading) * mount.y,
+        )
+        assert self._edges is not None
+        disc = self._scanned_human(time, human)
+        return scan_ranges(self._edges, origin, heading + mount.yaw, mount, disc)
 
     def _scanned_human(
         self, time: float, human: TrackedHuman | None
