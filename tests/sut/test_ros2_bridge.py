@@ -376,3 +376,40 @@ def test_a_failure_found_through_the_bridge_replays_through_it_once_named_again(
     assert replayed.returncode == 0, replayed.stderr
     assert "pure_pursuit_node.py" in replayed.stderr  # the command it starts is shown first
     assert "reproduced" in replayed.stdout
+
+
+def test_new_sut_ros2_writes_a_node_a_map_a_scenario_and_a_campaign_that_loads(tmp_path):
+    folder = tmp_path / "my_robot"
+    done = hazardhunt("new-sut", folder, "--ros2")
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "README.md", "campaign.toml", "my_map.pgm", "my_map.yaml", "my_node.py",
+        "my_scenario.toml",
+    ]  # fmt: skip
+    shipped = ROOT / "src" / "hazardhunt" / "scenarios" / "shopfloor.pgm"
+    assert (folder / "my_map.pgm").read_bytes() == shipped.read_bytes()
+    campaign = load_campaign(folder / "campaign.toml")
+    assert campaign.controller.path == "ros2"
+    command = shlex.split(campaign.controller.params["command"])
+    assert command == [sys.executable, str(folder.resolve() / "my_node.py")]
+    node = (folder / "my_node.py").read_text()
+    assert "import hazardhunt" not in node
+    assert "from hazardhunt" not in node  # plain rclpy and standard messages
+    assert node_processes(str(folder)) == []
+
+
+@pytest.mark.slow
+def test_the_campaign_new_sut_ros2_writes_runs_as_written(tmp_path):
+    folder = tmp_path / "my_robot"
+    assert hazardhunt("new-sut", folder, "--ros2").returncode == 0
+    done = hazardhunt("campaign", folder / "campaign.toml", "--out", tmp_path / "results")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "results" / "summary.json").read_text())
+    assert summary, summary
+    runs = sorted((tmp_path / "results" / "runs").iterdir())
+    assert len(runs) == 2  # the two field settings
+    for run in runs:
+        episodes, _ = run_tables(run)
+        assert len(episodes) == 20
+        assert "sut_error" not in set(episodes["outcome"])
+    assert node_processes(str(folder)) == []
