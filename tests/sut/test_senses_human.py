@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from hazardhunt.sim.effects import SutEffects
 from hazardhunt.sim.simulation import Simulation
 from hazardhunt.sut.plugins import PluginError, build_controller
 from hazardhunt.sut.protocols import SensesHuman
@@ -60,6 +61,19 @@ def test_a_sensing_controller_gets_the_true_human_where_the_cameras_do_not_see_i
     assert times == pytest.approx([0.2 * k for k in range(len(times))])
     assert {position for _, position, _ in controller.sensed} == {(10.0, 5.0)}
     assert {radius for _, _, radius in controller.sensed} == {0.25}
+
+
+def test_the_uncertainties_noise_and_dropped_frames_reach_the_tracks_not_the_true_human():
+    controller = Sensing()
+    simulation = Simulation.build("crossing", "none", controller=controller)
+    simulation.effects = SutEffects(tracking_noise=0.3, dropped_frames=0.5, seed=4)
+    simulation.simulate(STANDING)
+    tracked = controller.tracked
+    assert None in tracked  # frames dropped
+    seen = [h.position.tolist() for h in tracked if h is not None]
+    assert seen
+    assert all(p != [10.0, 5.0] for p in seen)  # noisy
+    assert {position for _, position, _ in controller.sensed} == {(10.0, 5.0)}
 
 
 def test_a_sensing_controller_plays_the_same_episodes_as_one_without_the_method():
