@@ -964,9 +964,18 @@ REGRESS_UNTESTED = 3
 @app.command("new-sut", cls=_Command)
 def new_sut(
     directory: Annotated[Path, typer.Argument(help="A new folder for the files (created).")],
+    ros2: Annotated[
+        bool,
+        typer.Option(
+            "--ros2",
+            help="A ROS 2 node to fill in, a site map (map_server YAML and PGM), a scenario on "
+            "it and a campaign that runs the node through the ros2 bridge (docs/ros2.md).",
+        ),
+    ] = False,
 ) -> None:
     """Write a starting point for testing your own system: a controller plug-in, a floor map
     and a scenario to edit, a campaign file and a README of the next commands."""
+    import shlex
     from importlib import resources
 
     from hazardhunt.campaign.config import check_output_location
@@ -975,14 +984,21 @@ def new_sut(
         raise ConfigError(f"{directory}: exists and is not empty; name a new folder")
     check_output_location(directory, option="DIRECTORY")
     directory.mkdir(parents=True, exist_ok=True)
-    templates = resources.files("hazardhunt") / "templates" / "new_sut"
+    kind = "new_sut_ros2" if ros2 else "new_sut"
+    templates = resources.files("hazardhunt") / "templates" / kind
     names = sorted(t.name for t in templates.iterdir() if t.is_file())
     for name in names:
-        (directory / name).write_text((templates / name).read_text(encoding="utf-8"))
+        content = (templates / name).read_bytes()
+        if ros2 and name == "campaign.toml":
+            # The node's command line: this Python (it has the ros2 extra) and the node's path.
+            node = shlex.join([sys.executable, str(directory.resolve() / "my_node.py")])
+            content = content.replace(b"@COMMAND@", json.dumps(node).encode())
+        (directory / name).write_bytes(content)
     console.print(f"written to [bold]{escape(str(directory))}[/bold]: {', '.join(names)}")
+    workers = "" if ros2 else " --workers 2"
     console.print(
-        f"next: cd {escape(str(directory))} && hazardhunt campaign campaign.toml --out results "
-        "--workers 2 (README.md has the commands after it)",
+        f"next: cd {escape(str(directory))} && hazardhunt campaign campaign.toml --out results"
+        f"{workers} (README.md has the commands after it)",
         highlight=False,
     )
 

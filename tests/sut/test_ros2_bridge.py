@@ -30,6 +30,8 @@ from hazardhunt.sut.ros2.bridge import Ros2Controller
 
 ROOT = Path(__file__).parents[2]
 PURSUIT_NODE = ROOT / "examples" / "ros2" / "pure_pursuit_node.py"
+NMPC_NODE = ROOT / "examples" / "ros2" / "nmpc_node.py"
+SCENARIOS = ROOT / "src" / "hazardhunt" / "scenarios"
 TEST_NODES = Path(__file__).parent / "ros2_nodes"
 
 
@@ -88,6 +90,71 @@ def test_the_answering_node_plays_the_in_process_controllers_episodes_exactly():
     in_process = played(PursuitController(), actions)
     assert [e[0] for e in in_process].count(None) < len(actions)  # episodes that ended
     assert through_ros == in_process
+
+
+def test_the_scan_shows_the_true_human_also_where_the_cameras_do_not_see_it():
+    from hazardhunt.world.bodies import RobotParams, RobotState
+
+    simulation = Simulation.build("crossing", "none")  # its floor and route
+    floor = dataclasses.replace(
+        simulation.scenario.floor,
+        blind_zones=(np.array([[9.0, 4.0], [11.0, 4.0], [11.0, 6.0], [9.0, 6.0]]),),
+    )
+    robot = RobotState(5.0, 4.75, 0.0, 0.0, 0.0)  # in the aisle y 4..5.5, facing east
+    bridge = Ros2Controller(command=node_command(TEST_NODES / "scan_echo_node.py"))
+    ahead = []
+    try:
+        bridge.reset(floor, simulation.route, robot, RobotParams())
+        for time_s, sensed in ((0.0, True), (0.2, False)):
+            if sensed:  # as the simulation does at each instant: the true human, untracked
+                bridge.sense_human(time_s, np.array([10.0, 4.75]), 0.25)
+            ahead.append(bridge.control(time_s, robot, None).speed)  # the middle ray's range
+    finally:
+        bridge.close()
+    assert ahead[0] == pytest.approx(4.75, abs=1e-5)  # the human's disc, 10 - 0.25 - 5
+    assert ahead[1] == pytest.approx(14.8, abs=1e-5)  # not given: the east wall at 19.8
+
+
+PHYSICAL = ("time", "human_x", "human_y", "human_heading", "robot_x", "robot_y", "robot_heading",
+            "robot_speed", "robot_yaw_rate", "human_visible", "emergency_stop", "human_in_field",
+            "clearance")  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_nmpc_node_plays_the_in_process_nmpcs_episodes(tmp_path):
+    from hazardhunt.sut.nmpc import NMPCController
+
+    # The shop floor's ROS map, published at its own 0.1 m: the node's obstacles are the
+    # in-process NMPC's, in the same order.
+    text = (SCENARIOS / "crossing.toml").read_text()
+    scenario = tmp_path / "crossing-on-map.toml"
+    scenario.write_text(
+        text.replace('"shopfloor.toml"', json.dumps(str(SCENARIOS / "shopfloor.yaml")))
+    )
+    actions = [a for seed in (0, 1) for a in random_actions(seed, 2)]
+
+    def episodes(controller):
+        simulation = Simulation.build(str(scenario), "none", controller=controller)
+        played = []
+        for episode_actions in actions:
+            summary = simulation.simulate(episode_actions).summary
+            trajectory = [[getattr(s, name) for name in PHYSICAL] for s in simulation.trajectory()]
+            played.append(((summary.outcome, summary.contact_face), np.array(trajectory, float)))
+        return played
+
+    bridge = Ros2Controller(command=node_command(NMPC_NODE), map_resolution=0.1)
+    try:
+        through_ros = episodes(bridge)
+    finally:
+        bridge.close()
+    in_process = episodes(NMPCController())
+    assert [e[0] for e in through_ros] == [e[0] for e in in_process]
+    assert {e[0][0] for e in in_process} - {None, "sut_error"}  # episodes that ended
+    for (_, ros), (_, local) in zip(through_ros, in_process, strict=True):
+        assert ros.shape == local.shape
+        # Equal but for the last bits: the stamps' whole nanoseconds and the heading's
+        # quaternion round the node's inputs (docs/ros2.md).
+        np.testing.assert_allclose(ros, local, rtol=0, atol=1e-9)
 
 
 def test_simulated_time_never_runs_backwards_in_a_nodes_life():
@@ -309,3 +376,40 @@ def test_a_failure_found_through_the_bridge_replays_through_it_once_named_again(
     assert replayed.returncode == 0, replayed.stderr
     assert "pure_pursuit_node.py" in replayed.stderr  # the command it starts is shown first
     assert "reproduced" in replayed.stdout
+
+
+def test_new_sut_ros2_writes_a_node_a_map_a_scenario_and_a_campaign_that_loads(tmp_path):
+    folder = tmp_path / "my_robot"
+    done = hazardhunt("new-sut", folder, "--ros2")
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "README.md", "campaign.toml", "my_map.pgm", "my_map.yaml", "my_node.py",
+        "my_scenario.toml",
+    ]  # fmt: skip
+    shipped = ROOT / "src" / "hazardhunt" / "scenarios" / "shopfloor.pgm"
+    assert (folder / "my_map.pgm").read_bytes() == shipped.read_bytes()
+    campaign = load_campaign(folder / "campaign.toml")
+    assert campaign.controller.path == "ros2"
+    command = shlex.split(campaign.controller.params["command"])
+    assert command == [sys.executable, str(folder.resolve() / "my_node.py")]
+    node = (folder / "my_node.py").read_text()
+    assert "import hazardhunt" not in node
+    assert "from hazardhunt" not in node  # plain rclpy and standard messages
+    assert node_processes(str(folder)) == []
+
+
+@pytest.mark.slow
+def test_the_campaign_new_sut_ros2_writes_runs_as_written(tmp_path):
+    folder = tmp_path / "my_robot"
+    assert hazardhunt("new-sut", folder, "--ros2").returncode == 0
+    done = hazardhunt("campaign", folder / "campaign.toml", "--out", tmp_path / "results")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "results" / "summary.json").read_text())
+    assert summary, summary
+    runs = sorted((tmp_path / "results" / "runs").iterdir())
+    assert len(runs) == 2  # the two field settings
+    for run in runs:
+        episodes, _ = run_tables(run)
+        assert len(episodes) == 20
+        assert "sut_error" not in set(episodes["outcome"])
+    assert node_processes(str(folder)) == []

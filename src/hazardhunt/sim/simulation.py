@@ -202,6 +202,9 @@ class Simulation:
         every reset, so that a method replaced in between is the one called)."""
         self._call_safety: Callable[..., Any] = safety_layer.update
         """The safety layer's ``update``, likewise."""
+        self._call_sense: Callable[..., Any] | None = None
+        """The controller's optional ``sense_human``
+        (:class:`~hazardhunt.sut.protocols.SensesHuman`), likewise; None without it."""
         try:
             self.route: Route = scenario_route(scenario, robot.width)
         except RoutePlanningError as error:
@@ -324,6 +327,8 @@ class Simulation:
         # The plug-ins' per-step calls for this episode, under the time limit if there is one.
         self._call_control = self._time_limit.bound("control()", self.controller.control)
         self._call_safety = self._time_limit.bound("update()", self.safety_layer.update)
+        sense = getattr(self.controller, "sense_human", None)
+        self._call_sense = None if sense is None else self._time_limit.bound("sense_human()", sense)
         try:
             self._time_limit.call("the safety layer's reset()", self.safety_layer.reset)
         except BaseException as error:  # a plug-in may raise anything, SystemExit too
@@ -577,6 +582,8 @@ class Simulation:
         counts = self._counts
         counts.controller_calls += 1
         try:
+            if self._call_sense is not None:  # the true human, for a sensor of the controller's
+                self._call_sense(now, self.human_position, self.human_params.radius)
             command = checked_command(self._call_control(now, self.robot, tracked))
         except BaseException as error:  # a plug-in may raise anything, SystemExit too
             if not is_plugin_fault(error):

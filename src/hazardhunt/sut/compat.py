@@ -190,6 +190,9 @@ def adapt_controller(path: str, controller: Controller) -> Controller:
     """
     if not takes(controller.control, 3):
         raise mismatch(path, "control", controller.control, "(time, robot, human)")
+    sense = getattr(controller, "sense_human", None)
+    if sense is not None and not (callable(sense) and takes(sense, 3)):
+        raise mismatch(path, "sense_human", sense, "(time, human_position, radius)")
     adapted: Controller = CONTROLLER_RESET.adapt(path, controller, _ControllerBefore020)
     return adapted
 

@@ -26,6 +26,7 @@ __all__ = [
     "RobotState",
     "SafetyLayer",
     "SafetyStatus",
+    "SensesHuman",
     "TrackedHuman",
 ]
 
@@ -105,6 +106,29 @@ class Controller(Protocol):
         Returns:
             The command. A controller that cannot compute one returns a command with
             ``failed=True`` (the robot then brakes); it should not raise.
+        """
+        ...
+
+
+@runtime_checkable
+class SensesHuman(Protocol):
+    """An optional extension of :class:`Controller`, for a controller that simulates a sensor
+    of its own on the robot (the ROS 2 bridge's laser scanner): it also gets the human's true
+    position. A controller without this method is called as before.
+
+    The simulation calls :meth:`sense_human` at each control instant, just before ``control``
+    with the same ``time``. The position is the human's true one at that instant: the tracking
+    cameras' blind zones, and the tracking noise, latency and dropped frames of ``estimate``'s
+    uncertainties, do not apply to it (they apply to ``control``'s ``human``).
+    """
+
+    def sense_human(self, time: float, human_position: FloatArray, radius: float) -> None:
+        """Take the human's true position at ``time``.
+
+        Args:
+            time: Simulated time, in s (the next ``control`` call's).
+            human_position: The human's centre (x, y), in m.
+            radius: The human disc's radius, in m.
         """
         ...
 

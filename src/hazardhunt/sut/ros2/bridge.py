@@ -20,7 +20,13 @@ from typing import Any, Literal
 import numpy as np
 
 from hazardhunt.errors import PluginError
-from hazardhunt.sut.protocols import ControlCommand, RobotParams, RobotState, TrackedHuman
+from hazardhunt.sut.protocols import (
+    ControlCommand,
+    FloatArray,
+    RobotParams,
+    RobotState,
+    TrackedHuman,
+)
 from hazardhunt.sut.ros2.processes import DomainLease, NodeProcess, stop_all
 from hazardhunt.sut.ros2.sensing import ScannerParams, floor_edges, occupancy, scan_ranges
 from hazardhunt.sut.ros2.topics import BridgeNode, ros_modules
@@ -148,6 +154,8 @@ class Ros2Controller:
         self._edges: np.ndarray | None = None
         self._map_message: Any = None
         self._radius = 0.25
+        self._sensed: tuple[float, tuple[float, float, float]] | None = None
+        """The instant and the human's true disc (x, y, radius) from :meth:`sense_human`."""
 
     # ------------------------------------------------------------------ protocol
     def reset(self, floor: FloorMap, route: Route, robot: RobotState, params: RobotParams) -> None:
@@ -166,6 +174,7 @@ class Ros2Controller:
         ros = self._session.ros
         self._session.lease.touch()
         self._restart = False
+        self._sensed = None
         if floor is not self._floor:
             self._floor, self._edges = floor, floor_edges(floor)
             cells, columns, rows = occupancy(floor, self.map_resolution)
@@ -178,6 +187,12 @@ class Ros2Controller:
         if self.reset_mode == "service":
             ros.call_reset(self.reset_service, self.startup_timeout, self._check_nodes)
 
+    def sense_human(self, time: float, human_position: FloatArray, radius: float) -> None:
+        """Take the human's true position for the next instant's scan (the laser sees the real
+        human, wherever the tracking cameras place it or lose it)."""
+        x, y = (float(value) for value in human_position)
+        self._sensed = (time, (x, y, float(radius)))
+
     def control(self, time: float, robot: RobotState, human: TrackedHuman | None) -> ControlCommand:
         """Publish this instant's messages and return the node's answer.
 
@@ -189,15 +204,7 @@ class Ros2Controller:
         ros = self._session.ros
         stamp = self._offset_ns + round(time * 1e9)
         self._last_ns = max(self._last_ns, stamp)
-        heading = robot.heading
-        mount = self.scanner
-        origin = (
-            robot.x + math.cos(heading) * mount.x - math.sin(heading) * mount.y,
-            robot.y + math.sin(heading) * mount.x + math.cos(heading) * mount.y,
-        )
-        disc = None if human is None else (*human.position.tolist(), self._radius)
-        assert self._edges is not None
-        ranges = scan_ranges(self._edges, origin, heading + mount.yaw, mount, disc)
+        ranges = self._scan(time, robot, human) if ros.scan_wanted() else None
         started = _monotonic()
         ros.drain()
         ros.publish_instant(stamp, robot, ranges, self.scanner, human)
@@ -207,6 +214,26 @@ class Ros2Controller:
             self._restart = True
             raise
         return ControlCommand(speed=speed, yaw_rate=yaw_rate, solve_time_s=_monotonic() - started)
+
+    def _scan(self, time: float, robot: RobotState, human: TrackedHuman | None) -> FloatArray:
+        """This instant's ranges, ray-cast from the scanner's pose on the robot."""
+        heading, mount = robot.heading, self.scanner
+        origin = (
+            robot.x + math.cos(heading) * mount.x - math.sin(heading) * mount.y,
+            robot.y + math.sin(heading) * mount.x + math.cos(heading) * mount.y,
+        )
+        assert self._edges is not None
+        disc = self._scanned_human(time, human)
+        return scan_ranges(self._edges, origin, heading + mount.yaw, mount, disc)
+
+    def _scanned_human(
+        self, time: float, human: TrackedHuman | None
+    ) -> tuple[float, float, float] | None:
+        """The human's disc in this instant's scan: the true one given for ``time`` by
+        :meth:`sense_human` (as the simulation does), else the tracked one."""
+        if self._sensed is not None and self._sensed[0] == time:
+            return self._sensed[1]
+        return None if human is None else (*human.position.tolist(), self._radius)
 
     # ------------------------------------------------------------------ nodes
     def close(self) -> None:

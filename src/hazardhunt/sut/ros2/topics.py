@@ -164,6 +164,11 @@ class BridgeNode:
                         f"{node} {verb} {topic} as {endpoint.topic_type}, not {message_type}"
                     )
 
+    def scan_wanted(self) -> bool:
+        """Whether a node subscribes to the scan (else it is neither ray-cast nor published:
+        a message no subscriber is matched to goes nowhere)."""
+        return bool(self.scan.get_subscription_count() > 0)
+
     def commands_matched(self) -> bool:
         return bool(self.node.count_publishers(self.topics["cmd_vel"]) > 0)
 
@@ -217,12 +222,13 @@ class BridgeNode:
         self,
         nanoseconds: int,
         robot: RobotState,
-        ranges: np.ndarray,
+        ranges: np.ndarray | None,
         scanner: ScannerParams,
         human: TrackedHuman | None,
     ) -> None:
-        """Scan, (when tracked) the human and odometry at one instant, then ``/clock``: a timer
-        on simulated time that fires at the instant finds its data, unless it comes late."""
+        """Scan (unless ``ranges`` is None), (when tracked) the human and odometry at one
+        instant, then ``/clock``: a timer on simulated time that fires at the instant finds its
+        data, unless it comes late."""
         stamp = self._stamp(nanoseconds)
         odometry = self.m["Odometry"]()
         odometry.header.stamp, odometry.header.frame_id = stamp, FRAMES["odom"]
@@ -230,13 +236,14 @@ class BridgeNode:
         odometry.pose.pose = self._pose(robot.x, robot.y, robot.heading, stamp).pose
         odometry.twist.twist.linear.x = float(robot.speed)
         odometry.twist.twist.angular.z = float(robot.yaw_rate)
-        scan = self.m["LaserScan"]()
-        scan.header.stamp, scan.header.frame_id = stamp, FRAMES["robot"]
-        scan.angle_min, scan.angle_max = scanner.angle_min, float(scanner.angles[-1])
-        scan.angle_increment = scanner.angle_increment
-        scan.range_min, scan.range_max = scanner.range_min, scanner.range_max
-        scan.ranges = ranges.astype(np.float32)
-        self.scan.publish(scan)
+        if ranges is not None:
+            scan = self.m["LaserScan"]()
+            scan.header.stamp, scan.header.frame_id = stamp, FRAMES["robot"]
+            scan.angle_min, scan.angle_max = scanner.angle_min, float(scanner.angles[-1])
+            scan.angle_increment = scanner.angle_increment
+            scan.range_min, scan.range_max = scanner.range_min, scanner.range_max
+            scan.ranges = ranges.astype(np.float32)
+            self.scan.publish(scan)
         if human is not None:
             self.human.publish(self._human(human, stamp))
         self.odom.publish(odometry)
