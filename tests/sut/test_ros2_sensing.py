@@ -12,9 +12,11 @@ from hazardhunt.sut.ros2.sensing import (
     ScannerParams,
     floor_edges,
     occupancy,
+    published_grid,
     scan_ranges,
 )
 from hazardhunt.world.floor import FloorMap, Obstacle
+from hazardhunt.world.rosmap import UNKNOWN, OccupancyGrid, grid_floor
 
 BOX = Obstacle("box", np.array([[6.0, 4.0], [8.0, 4.0], [8.0, 6.0], [6.0, 6.0]]))
 FLOOR = FloorMap("room", 10.0, 10.0, (BOX,))
@@ -55,3 +57,14 @@ def test_the_occupancy_grid_marks_the_cells_inside_obstacles():
     assert grid[10, 14] == OCCUPIED  # centre (7.25, 5.25) lies in the box
     assert grid[10, 11] == FREE  # (5.75, 5.25) lies west of it
     assert int((grid == OCCUPIED).sum()) == 16  # 2 m x 2 m in 0.5 m cells
+
+
+def test_a_floor_read_from_a_site_map_is_published_as_that_maps_own_grid():
+    # Row 0 is the south: an unknown cell stays unknown (-1), as map_server publishes it,
+    # and the map's resolution is kept whatever map_resolution says.
+    cells = np.array([[FREE, OCCUPIED, FREE], [UNKNOWN, FREE, FREE]], dtype=np.int8)
+    site = grid_floor("site", OccupancyGrid(0.1, (-4.5, -2.25, 0.0), cells))
+    data, columns, rows, resolution = published_grid(site, 0.05)
+    assert (columns, rows, resolution) == (3, 2, 0.1)
+    assert data.tolist() == [FREE, OCCUPIED, FREE, UNKNOWN, FREE, FREE]
+    assert published_grid(FLOOR, 0.5)[1:] == (20, 20, 0.5)  # a polygon floor is rasterised

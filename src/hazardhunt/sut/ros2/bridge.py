@@ -28,7 +28,7 @@ from hazardhunt.sut.protocols import (
     TrackedHuman,
 )
 from hazardhunt.sut.ros2.processes import DomainLease, NodeProcess, stop_all
-from hazardhunt.sut.ros2.sensing import ScannerParams, floor_edges, occupancy, scan_ranges
+from hazardhunt.sut.ros2.sensing import ScannerParams, floor_edges, published_grid, scan_ranges
 from hazardhunt.sut.ros2.topics import BridgeNode, ros_modules
 from hazardhunt.sut.route import Route
 from hazardhunt.world.floor import FloorMap
@@ -106,7 +106,8 @@ class Ros2Controller:
             reset_service: The reset service's name.
             topics: Topic names by role (keys of :data:`TOPICS`), instead of the defaults.
             scanner: Fields of :class:`~hazardhunt.sut.ros2.sensing.ScannerParams`.
-            map_resolution: Cell size of the published occupancy grid, in m.
+            map_resolution: Cell size of the published occupancy grid, in m (a floor read
+                from a site map is published as that map's grid).
             grace: Time a node has to exit after SIGINT before it is killed, in s.
 
         Raises:
@@ -177,8 +178,8 @@ class Ros2Controller:
         self._sensed = None
         if floor is not self._floor:
             self._floor, self._edges = floor, floor_edges(floor)
-            cells, columns, rows = occupancy(floor, self.map_resolution)
-            self._map_message = ros.map_message(cells, columns, rows, self.map_resolution)
+            cells, columns, rows, resolution = published_grid(floor, self.map_resolution)
+            self._map_message = ros.map_message(cells, columns, rows, resolution)
         start = -(-(self._last_ns + EPISODE_GAP_NS) // 1_000_000_000) * 1_000_000_000
         self._offset_ns = self._last_ns = start
         # Just before the first instant: a node's timer due at the first instant fires then.

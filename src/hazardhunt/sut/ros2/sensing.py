@@ -105,6 +105,21 @@ OCCUPIED, FREE = 100, 0
 """The OccupancyGrid values of a cell inside an obstacle and of a free one."""
 
 
+def published_grid(floor: FloorMap, resolution: float) -> tuple[np.ndarray, int, int, float]:
+    """The occupancy grid the bridge publishes of ``floor``: a site map's own grid, at its own
+    resolution and with its unknown cells (-1), for a floor read from a ROS map; any other floor
+    rasterised at ``resolution`` (:func:`occupancy`).
+
+    Returns:
+        The cells row by row from the south (int8, as OccupancyGrid.data), width and height in
+        cells, and the side of a cell in m.
+    """
+    if floor.occupancy is not None:
+        grid = floor.occupancy
+        return grid.cells.ravel(), grid.columns, grid.rows, grid.resolution
+    return (*occupancy(floor, resolution), resolution)
+
+
 def occupancy(floor: FloorMap, resolution: float) -> tuple[np.ndarray, int, int]:
     """The floor as a grid of ``resolution`` m cells from (0, 0): a cell whose centre lies in an
     obstacle is :data:`OCCUPIED`, any other :data:`FREE`.
