@@ -359,7 +359,7 @@ def test_a_stopped_campaign_with_two_workers_leaves_no_node_and_no_shared_memory
 
 
 @pytest.mark.slow
-def test_a_failure_found_through_the_bridge_replays_through_it_once_named_again(tmp_path):
+def test_a_bridge_failure_replays_and_regresses_for_a_node_command_one_names_or_trusts(tmp_path):
     out = tmp_path / "run"
     command = f"command={json.dumps(node_command(PURSUIT_NODE))}"
     done = hazardhunt(
@@ -372,10 +372,24 @@ def test_a_failure_found_through_the_bridge_replays_through_it_once_named_again(
     refused = hazardhunt("replay", out, "--episode", episode)
     assert refused.returncode == 2
     assert "names the plug-in 'ros2'" in refused.stderr
-    replayed = hazardhunt("replay", out, "--episode", episode, "--controller", "ros2")
+    # Naming ros2 again is not enough: the node command the run names is data, run only when
+    # the user gives their own or trusts the file.
+    named = hazardhunt("replay", out, "--episode", episode, "--controller", "ros2")
+    assert named.returncode == 2
+    assert "--controller-param command=..." in named.stderr
+    assert "pure_pursuit_node.py" not in named.stderr
+    replayed = hazardhunt(
+        "replay", out, "--episode", episode, "--controller", "ros2", "--controller-param", command
+    )
     assert replayed.returncode == 0, replayed.stderr
     assert "pure_pursuit_node.py" in replayed.stderr  # the command it starts is shown first
     assert "reproduced" in replayed.stdout
+    cases = tmp_path / "cases"
+    assert hazardhunt("export", out, "--out", cases).returncode == 0
+    regressed = hazardhunt("regress", cases, "--json", "--trust-plugins")
+    assert regressed.returncode == 1, regressed.stderr  # the same node fails them all again
+    verdicts = {case["verdict"] for case in json.loads(regressed.stdout)["cases"]}
+    assert verdicts == {"still fails"}
 
 
 def test_new_sut_ros2_writes_a_node_a_map_a_scenario_and_a_campaign_that_loads(tmp_path):

@@ -88,10 +88,11 @@ def allowed_plugin(
     ``stored`` if ``trust``, else None when the file names none (the built-in one is used).
 
     ``given`` with the stored import path and no parameters of its own confirms the stored
-    plug-in: it takes the stored parameters. Either way the module is imported as a plug-in
-    named on the command line is (the working directory, then ``sys.path``), never from a
-    directory the file names or lies in. ``announce`` is told which module is about to be
-    imported.
+    plug-in: it takes the stored parameters (for a built-in controller whose parameters say
+    what it runs, the ros2 bridge's node command, only with ``trust``). Either way the module
+    is imported as a plug-in named on the command line is (the working directory, then
+    ``sys.path``), never from a directory the file names or lies in. ``announce`` is told
+    which module is about to be imported.
 
     Args:
         stored: The plug-in the file names (data), None if it names none.
@@ -106,6 +107,15 @@ def allowed_plugin(
     """
     if given is not None:
         if stored is not None and given.path == stored.path and not given.params:
+            if given.path in BUILT_IN_CONTROLLERS and not trust:
+                # Its parameters say what it runs (the ros2 bridge's node command): code too.
+                raise UntrustedPluginError(
+                    f"{where}: names the controller {given.path} with parameters that say what "
+                    "it starts (a command line), which hazardhunt does not run from a file it "
+                    f"reads; give your own ({option} {given.path} {option}-param "
+                    f"command=...), or, having read them, trust this file's plug-ins "
+                    f"({TRUST_OPTION})"
+                )
             given = given.model_copy(update={"params": dict(stored.params)})
         chosen, reason = given, f"{option} {given.path}"
     elif stored is None:
