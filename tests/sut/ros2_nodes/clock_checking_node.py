@@ -7,6 +7,7 @@ from pathlib import Path
 
 import rclpy
 from rosgraph_msgs.msg import Clock
+from spinning import spin
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "examples" / "ros2"))
 from pure_pursuit_node import PurePursuit
@@ -39,12 +40,7 @@ class ClockChecking(PurePursuit):
 def main() -> None:
     rclpy.init()
     node = ClockChecking()
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import rclpy
+from spinning import spin
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "examples" / "ros2"))
 from pure_pursuit_node import PurePursuit
@@ -30,12 +31,7 @@ class CrashingPursuit(PurePursuit):
 def main() -> None:
     rclpy.init()
     node = CrashingPursuit()
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import LaserScan
+from spinning import spin
 
 
 def nanoseconds(stamp) -> int:
@@ -39,12 +40,7 @@ def main() -> None:
     rclpy.init()
     node = rclpy.create_node("scan_echo")
     ScanEcho(node)
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 import rclpy
 from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
+from spinning import spin
 
 
 def main() -> None:
@@ -10,12 +11,7 @@ def main() -> None:
     node = rclpy.create_node("silent")
     node.create_publisher(Twist, "cmd_vel", 10)
     node.create_subscription(Odometry, "odom", lambda message: None, 10)
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == "__main__":

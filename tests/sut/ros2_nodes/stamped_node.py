@@ -3,6 +3,7 @@
 import rclpy
 from geometry_msgs.msg import TwistStamped
 from nav_msgs.msg import Odometry
+from spinning import spin
 
 
 def main() -> None:
@@ -10,12 +11,7 @@ def main() -> None:
     node = rclpy.create_node("stamped")
     commands = node.create_publisher(TwistStamped, "cmd_vel", 10)
     node.create_subscription(Odometry, "odom", lambda message: commands.publish(TwistStamped()), 10)
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        rclpy.try_shutdown()
+    spin(node)
 
 
 if __name__ == "__main__":
